@@ -1,0 +1,50 @@
+# One place for compiler flags, sanitizers and ccache.
+#
+#   fl_target_flags(<target>)   adds the project warning set to a target.
+#
+# Options:
+#   FL_SANITIZE=ON      build everything with AddressSanitizer + UBSan.
+#   FL_WERROR=ON        turn warnings into errors (CI uses this).
+
+option(FL_SANITIZE "Build with address and undefined-behaviour sanitizers" OFF)
+option(FL_WERROR "Treat compiler warnings as errors" OFF)
+
+find_program(FL_CCACHE ccache)
+if(FL_CCACHE)
+  set(CMAKE_CXX_COMPILER_LAUNCHER ${FL_CCACHE})
+  set(CMAKE_C_COMPILER_LAUNCHER ${FL_CCACHE})
+endif()
+
+if(FL_SANITIZE)
+  add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined)
+endif()
+
+function(fl_target_flags target)
+  target_compile_options(${target} PRIVATE -Wall -Wextra)
+  if(FL_WERROR)
+    target_compile_options(${target} PRIVATE -Werror)
+  endif()
+endfunction()
+
+# fl_executable(<name> SOURCES ... LIBS ...): an fl-<name> program in build/bin.
+function(fl_executable name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS" ${ARGN})
+  add_executable(fl-${name} ${ARG_SOURCES})
+  target_link_libraries(fl-${name} PRIVATE ${ARG_LIBS})
+  fl_target_flags(fl-${name})
+endfunction()
+
+# fl_test(<name> SOURCES ... LIBS ... [LABELS ...]): a GoogleTest binary registered with ctest.
+function(fl_test name)
+  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
+  target_compile_definitions(${name} PRIVATE
+    FL_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
+    FL_BINARY_DIR="${PROJECT_BINARY_DIR}"
+    FL_SHARED_DATA_DIR="${FL_SHARED_DATA_DIR}")
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/tests)
+  fl_target_flags(${name})
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+endfunction()

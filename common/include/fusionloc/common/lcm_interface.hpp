@@ -1,0 +1,181 @@
+// LCM behind a small interface (after Drake's DrakeLcmInterface), so that
+//  - processes run live over UDP multicast (udpm://),
+//  - tests run in memory (memq://),
+//  - a process can replay an LCM log file and write its outputs to another log at full speed,
+// all through the same subscribe/publish/handle code path.
+//
+//   auto lcm = fl::MakeLcm(url);          // "udpm://...", "memq://", or "log:IN.lcmlog[,OUT.lcmlog]"
+//   lcm->Subscribe<bot_core::planar_lidar_t>("LASER", [&](const auto& msg, const auto& ch) {...});
+//   while (!fl::ShutdownRequested() && lcm->HandleSubscriptions(100) >= 0) {}
+//
+// Typed subscriptions decode each message; a message that fails to decode (wrong type,
+// truncated) is counted, reported with a rate-limited warning naming the channel and type,
+// and never reaches the handler.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "fusionloc/common/log.hpp"
+#include "fusionloc/common/time.hpp"
+
+namespace fl {
+
+// Default live URL: loopback-only multicast (ttl=0) with a receive buffer large enough for
+// full-resolution stereo pairs.
+constexpr const char* kDefaultLcmUrl = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216";
+
+class LcmInterface {
+ public:
+  using RawHandler =
+      std::function<void(const std::string& channel, const void* data, int size, Utime recv_utime)>;
+
+  virtual ~LcmInterface() = default;
+
+  // Publishes encoded bytes. `utime` is the time stamp written to logs (live: ignored by LCM).
+  virtual void PublishRaw(const std::string& channel, const void* data, int size, Utime utime) = 0;
+
+  // Subscribes to channels matching `channel_regex` (LCM's anchored POSIX regex; a plain
+  // channel name matches itself).
+  virtual void SubscribeRaw(const std::string& channel_regex, RawHandler handler) = 0;
+
+  // Waits up to `timeout_ms` and dispatches received messages. Returns the number dispatched
+  // (0 on timeout), or -1 when the source is finished (end of a log) or broken.
+  virtual int HandleSubscriptions(int timeout_ms) = 0;
+
+  // The URL this instance was made from.
+  virtual std::string url() const = 0;
+
+  // Time of the message being (or last) dispatched: log time during replay, receive time live.
+  Utime last_message_utime() const { return last_message_utime_; }
+
+  int64_t messages_published() const { return published_; }
+  int64_t messages_received() const { return received_; }
+  int64_t decode_errors() const { return decode_warning_.count(); }
+
+  // Encodes and publishes an lcm-gen message. `utime` defaults to the message's utime field
+  // when it has one, else the current time.
+  template <class Msg>
+  void Publish(const std::string& channel, const Msg& msg, Utime utime = -1) {
+    const int size = msg.getEncodedSize();
+    buffer_.resize(static_cast<size_t>(size));
+    msg.encode(buffer_.data(), 0, size);
+    PublishRaw(channel, buffer_.data(), size, utime >= 0 ? utime : NowUtime());
+  }
+
+  // Decodes messages of type Msg on `channel_regex` and calls `handler(msg, channel)`.
+  template <class Msg>
+  void Subscribe(const std::string& channel_regex,
+                 std::function<void(const Msg& msg, const std::string& channel)> handler) {
+    SubscribeRaw(channel_regex,
+                 [this, handler](const std::string& channel, const void* data, int size, Utime) {
+                   Msg msg;
+                   if (msg.decode(data, 0, size) != size) {
+                     decode_warning_.Warn("channel '" + channel + "': a message of " +
+                                          std::to_string(size) + " bytes does not decode as " +
+                                          Msg::getTypeName() +
+                                          " (wrong type or truncated); check that the sender "
+                                          "uses the same lcmtypes");
+                     return;
+                   }
+                   handler(msg, channel);
+                 });
+  }
+
+ protected:
+  void CountPublished() { ++published_; }
+  void CountReceived(Utime utime) {
+    ++received_;
+    last_message_utime_ = utime;
+  }
+
+ private:
+  std::vector<uint8_t> buffer_;
+  RateLimitedWarning decode_warning_;
+  int64_t published_ = 0;
+  int64_t received_ = 0;
+  Utime last_message_utime_ = 0;
+};
+
+// Makes an interface from a URL:
+//   udpm://...  or memq://         live LCM (lcm::LCM)
+//   log:IN[,OUT]                  replay IN (an LCM log file) as fast as handled; messages
+//                                 published go to OUT if given (else they are counted and dropped).
+// Throws std::runtime_error with a clear message if the URL cannot be opened.
+std::unique_ptr<LcmInterface> MakeLcm(const std::string& url = kDefaultLcmUrl);
+
+// ---------------------------------------------------------------------------------------
+// LCM log files (the format of lcm-logger / lcm-logplayer), read and written directly so that
+// truncated or corrupt logs are detected and reported instead of silently cut short.
+
+struct LcmLogEvent {
+  int64_t event_number = 0;
+  Utime utime = 0;  // [us] time the event was logged
+  std::string channel;
+  std::vector<uint8_t> data;
+};
+
+class LcmLogReader {
+ public:
+  // Throws std::runtime_error naming the file if it cannot be opened.
+  explicit LcmLogReader(const std::string& path);
+  ~LcmLogReader();
+  LcmLogReader(const LcmLogReader&) = delete;
+  LcmLogReader& operator=(const LcmLogReader&) = delete;
+
+  // Reads the next event; false at the end of the file. Corrupt bytes are skipped up to the
+  // next sync word and counted; a truncated final event is counted and ends the log.
+  bool Next(LcmLogEvent* event);
+
+  const std::string& path() const { return path_; }
+  int64_t corrupt_bytes_skipped() const { return corrupt_bytes_; }
+  bool truncated() const { return truncated_; }
+  // A human-readable account of problems found so far ("" if none).
+  std::string ProblemSummary() const;
+  int64_t file_size() const { return file_size_; }
+  int64_t position() const;
+
+ private:
+  std::string path_;
+  void* file_ = nullptr;  // FILE*
+  int64_t file_size_ = 0;
+  int64_t corrupt_bytes_ = 0;
+  bool truncated_ = false;
+};
+
+class LcmLogWriter {
+ public:
+  // Writes to `path`. With atomic=true (default) the events go to "path.partial" and the file
+  // is renamed to `path` by Close(), so an interrupted run never leaves a log that looks whole.
+  explicit LcmLogWriter(const std::string& path, bool atomic = true);
+  ~LcmLogWriter();  // closes (and renames) if Close() was not called
+  LcmLogWriter(const LcmLogWriter&) = delete;
+  LcmLogWriter& operator=(const LcmLogWriter&) = delete;
+
+  void Write(const std::string& channel, const void* data, int size, Utime utime);
+  template <class Msg>
+  void Write(const std::string& channel, const Msg& msg, Utime utime) {
+    const int size = msg.getEncodedSize();
+    buffer_.resize(static_cast<size_t>(size));
+    msg.encode(buffer_.data(), 0, size);
+    Write(channel, buffer_.data(), size, utime);
+  }
+  // Flushes, closes and (if atomic) renames into place. Throws on I/O error.
+  void Close();
+  // Closes and deletes the partial output (use on failure).
+  void Abandon();
+  int64_t events_written() const { return next_event_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  std::string write_path_;
+  void* file_ = nullptr;  // FILE*
+  int64_t next_event_ = 0;
+  std::vector<uint8_t> buffer_;
+};
+
+}  // namespace fl

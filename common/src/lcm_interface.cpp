@@ -1,0 +1,311 @@
+#include "fusionloc/common/lcm_interface.hpp"
+
+#include <lcm/lcm-cpp.hpp>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <regex>
+#include <stdexcept>
+
+namespace fl {
+namespace {
+
+constexpr uint32_t kLogSyncWord = 0xEDA1DA01u;
+// Sanity bounds on one event: beyond these a header is taken as corrupt, not as a huge read.
+constexpr int32_t kMaxChannelLength = 1024;
+constexpr int32_t kMaxEventBytes = 512 * 1024 * 1024;
+
+uint32_t ReadBe32(const uint8_t* p) {
+  return (uint32_t(p[0]) << 24) | (uint32_t(p[1]) << 16) | (uint32_t(p[2]) << 8) | uint32_t(p[3]);
+}
+uint64_t ReadBe64(const uint8_t* p) {
+  return (uint64_t(ReadBe32(p)) << 32) | uint64_t(ReadBe32(p + 4));
+}
+void WriteBe32(uint32_t v, uint8_t* p) {
+  p[0] = uint8_t(v >> 24);
+  p[1] = uint8_t(v >> 16);
+  p[2] = uint8_t(v >> 8);
+  p[3] = uint8_t(v);
+}
+void WriteBe64(uint64_t v, uint8_t* p) {
+  WriteBe32(uint32_t(v >> 32), p);
+  WriteBe32(uint32_t(v), p + 4);
+}
+
+// ---- live LCM (udpm://, memq://) ----
+class LcmLive final : public LcmInterface {
+ public:
+  explicit LcmLive(const std::string& url) : url_(url), lcm_(url) {
+    if (!lcm_.good()) {
+      throw std::runtime_error(
+          "cannot open LCM URL '" + url +
+          "': check the URL; for udpm:// the host needs a multicast route "
+          "(e.g. 'ip route add 224.0.0.0/4 dev lo' and 'ip link set lo multicast on')");
+    }
+  }
+
+  void PublishRaw(const std::string& channel, const void* data, int size, Utime) override {
+    if (lcm_.publish(channel, data, static_cast<unsigned int>(size)) != 0) {
+      publish_warning_.Warn("LCM publish failed on channel '" + channel + "' (" +
+                            std::to_string(size) + " bytes); is the message larger than the "
+                            "transport allows?");
+      return;
+    }
+    CountPublished();
+  }
+
+  void SubscribeRaw(const std::string& channel_regex, RawHandler handler) override {
+    subscriptions_.push_back(std::make_unique<Subscription>(this, std::move(handler)));
+    lcm_.subscribe(channel_regex, &Subscription::OnMessage, subscriptions_.back().get());
+  }
+
+  int HandleSubscriptions(int timeout_ms) override {
+    const int r = lcm_.handleTimeout(timeout_ms);
+    return r < 0 ? -1 : r;  // LCM returns 1 when it handled one message, 0 on timeout
+  }
+
+  std::string url() const override { return url_; }
+
+ private:
+  struct Subscription {
+    Subscription(LcmLive* owner_in, RawHandler h) : owner(owner_in), handler(std::move(h)) {}
+    void OnMessage(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+      owner->CountReceived(rbuf->recv_utime);
+      handler(channel, rbuf->data, static_cast<int>(rbuf->data_size), rbuf->recv_utime);
+    }
+    LcmLive* owner;
+    RawHandler handler;
+  };
+
+  std::string url_;
+  lcm::LCM lcm_;
+  std::vector<std::unique_ptr<Subscription>> subscriptions_;
+  RateLimitedWarning publish_warning_;
+};
+
+// ---- log replay: reads one log, writes published messages to another ----
+class LcmLogReplay final : public LcmInterface {
+ public:
+  LcmLogReplay(const std::string& url, const std::string& in_path, const std::string& out_path)
+      : url_(url), reader_(in_path) {
+    if (!out_path.empty()) writer_ = std::make_unique<LcmLogWriter>(out_path);
+  }
+  ~LcmLogReplay() override {
+    if (writer_) {
+      try {
+        writer_->Close();
+      } catch (const std::exception& e) {
+        FL_LOG(ERROR) << e.what();
+      }
+    }
+  }
+
+  void PublishRaw(const std::string& channel, const void* data, int size, Utime utime) override {
+    // Outputs are stamped with the log time of the input being handled, if any, so that the
+    // output log lines up with the input log.
+    const Utime t = in_dispatch_ ? last_message_utime() : utime;
+    if (writer_) writer_->Write(channel, data, size, t);
+    CountPublished();
+  }
+
+  void SubscribeRaw(const std::string& channel_regex, RawHandler handler) override {
+    subs_.push_back({std::regex(channel_regex, std::regex::extended), std::move(handler)});
+  }
+
+  int HandleSubscriptions(int) override {
+    if (finished_) return -1;
+    if (!reader_.Next(&event_)) {
+      finished_ = true;
+      const std::string problems = reader_.ProblemSummary();
+      if (!problems.empty()) FL_LOG(WARN) << problems;
+      return -1;
+    }
+    CountReceived(event_.utime);
+    in_dispatch_ = true;
+    for (auto& s : subs_) {
+      if (std::regex_match(event_.channel, s.regex)) {
+        s.handler(event_.channel, event_.data.data(), static_cast<int>(event_.data.size()),
+                  event_.utime);
+      }
+    }
+    in_dispatch_ = false;
+    return 1;
+  }
+
+  std::string url() const override { return url_; }
+
+ private:
+  struct Sub {
+    std::regex regex;
+    RawHandler handler;
+  };
+  std::string url_;
+  LcmLogReader reader_;
+  std::unique_ptr<LcmLogWriter> writer_;
+  std::vector<Sub> subs_;
+  LcmLogEvent event_;
+  bool finished_ = false;
+  bool in_dispatch_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<LcmInterface> MakeLcm(const std::string& url) {
+  if (url.rfind("log:", 0) == 0) {
+    const std::string spec = url.substr(4);
+    const size_t comma = spec.find(',');
+    const std::string in = spec.substr(0, comma);
+    const std::string out = comma == std::string::npos ? "" : spec.substr(comma + 1);
+    if (in.empty()) {
+      throw std::runtime_error("LCM URL '" + url + "' names no input log; use log:IN[,OUT]");
+    }
+    return std::make_unique<LcmLogReplay>(url, in, out);
+  }
+  if (url.rfind("udpm://", 0) == 0 || url.rfind("memq://", 0) == 0 || url.empty()) {
+    return std::make_unique<LcmLive>(url);
+  }
+  throw std::runtime_error("unsupported LCM URL '" + url +
+                           "': use udpm://GROUP:PORT?ttl=0, memq:// or log:IN.lcmlog[,OUT.lcmlog]");
+}
+
+// ---------------------------------------------------------------------------------------
+LcmLogReader::LcmLogReader(const std::string& path) : path_(path) {
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) {
+    throw std::runtime_error("cannot open LCM log '" + path + "': " + std::strerror(errno));
+  }
+  std::fseek(f, 0, SEEK_END);
+  file_size_ = std::ftell(f);
+  std::fseek(f, 0, SEEK_SET);
+  file_ = f;
+}
+
+LcmLogReader::~LcmLogReader() {
+  if (file_) std::fclose(static_cast<FILE*>(file_));
+}
+
+int64_t LcmLogReader::position() const { return std::ftell(static_cast<FILE*>(file_)); }
+
+bool LcmLogReader::Next(LcmLogEvent* event) {
+  FILE* f = static_cast<FILE*>(file_);
+  uint8_t header[28];
+  while (true) {
+    const long start = std::ftell(f);
+    const size_t got = std::fread(header, 1, sizeof(header), f);
+    if (got == 0) return false;
+    if (got < sizeof(header)) {
+      truncated_ = true;
+      return false;
+    }
+    if (ReadBe32(header) != kLogSyncWord) {
+      // Resynchronise: step one byte forward and look again.
+      ++corrupt_bytes_;
+      std::fseek(f, start + 1, SEEK_SET);
+      continue;
+    }
+    const int64_t number = static_cast<int64_t>(ReadBe64(header + 4));
+    const int64_t utime = static_cast<int64_t>(ReadBe64(header + 12));
+    const int32_t channel_len = static_cast<int32_t>(ReadBe32(header + 20));
+    const int32_t data_len = static_cast<int32_t>(ReadBe32(header + 24));
+    if (channel_len <= 0 || channel_len > kMaxChannelLength || data_len < 0 ||
+        data_len > kMaxEventBytes) {
+      ++corrupt_bytes_;
+      std::fseek(f, start + 1, SEEK_SET);
+      continue;
+    }
+    if (start + 28 + int64_t(channel_len) + data_len > file_size_) {
+      truncated_ = true;
+      std::fseek(f, 0, SEEK_END);
+      return false;
+    }
+    event->event_number = number;
+    event->utime = utime;
+    event->channel.resize(static_cast<size_t>(channel_len));
+    event->data.resize(static_cast<size_t>(data_len));
+    if (std::fread(&event->channel[0], 1, channel_len, f) != size_t(channel_len) ||
+        (data_len > 0 && std::fread(event->data.data(), 1, data_len, f) != size_t(data_len))) {
+      truncated_ = true;
+      return false;
+    }
+    return true;
+  }
+}
+
+std::string LcmLogReader::ProblemSummary() const {
+  std::string s;
+  if (corrupt_bytes_ > 0) {
+    s += "LCM log '" + path_ + "': skipped " + std::to_string(corrupt_bytes_) +
+         " corrupt bytes between events";
+  }
+  if (truncated_) {
+    if (!s.empty()) s += "; ";
+    s += "LCM log '" + path_ + "' is truncated: the last event is incomplete and was ignored";
+  }
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------
+LcmLogWriter::LcmLogWriter(const std::string& path, bool atomic)
+    : path_(path), write_path_(atomic ? path + ".partial" : path) {
+  FILE* f = std::fopen(write_path_.c_str(), "wb");
+  if (!f) {
+    throw std::runtime_error("cannot write LCM log '" + write_path_ + "': " +
+                             std::strerror(errno) + " (does the folder exist and is it writable?)");
+  }
+  file_ = f;
+}
+
+LcmLogWriter::~LcmLogWriter() {
+  if (file_) {
+    try {
+      Close();
+    } catch (const std::exception& e) {
+      FL_LOG(ERROR) << e.what();
+    }
+  }
+}
+
+void LcmLogWriter::Write(const std::string& channel, const void* data, int size, Utime utime) {
+  if (!file_) throw std::runtime_error("LCM log '" + path_ + "' written after Close()");
+  uint8_t header[28];
+  WriteBe32(kLogSyncWord, header);
+  WriteBe64(static_cast<uint64_t>(next_event_), header + 4);
+  WriteBe64(static_cast<uint64_t>(utime), header + 12);
+  WriteBe32(static_cast<uint32_t>(channel.size()), header + 20);
+  WriteBe32(static_cast<uint32_t>(size), header + 24);
+  FILE* f = static_cast<FILE*>(file_);
+  if (std::fwrite(header, 1, 28, f) != 28 ||
+      std::fwrite(channel.data(), 1, channel.size(), f) != channel.size() ||
+      (size > 0 && std::fwrite(data, 1, size_t(size), f) != size_t(size))) {
+    throw std::runtime_error("write error on LCM log '" + write_path_ + "': " +
+                             std::strerror(errno) + " (disk full?)");
+  }
+  ++next_event_;
+}
+
+void LcmLogWriter::Close() {
+  if (!file_) return;
+  FILE* f = static_cast<FILE*>(file_);
+  file_ = nullptr;
+  const bool ok = std::fflush(f) == 0;
+  const bool closed = std::fclose(f) == 0;
+  if (!ok || !closed) {
+    std::remove(write_path_.c_str());
+    throw std::runtime_error("cannot finish LCM log '" + write_path_ + "': " +
+                             std::strerror(errno));
+  }
+  if (write_path_ != path_ && std::rename(write_path_.c_str(), path_.c_str()) != 0) {
+    throw std::runtime_error("cannot rename '" + write_path_ + "' to '" + path_ + "': " +
+                             std::strerror(errno));
+  }
+}
+
+void LcmLogWriter::Abandon() {
+  if (!file_) return;
+  std::fclose(static_cast<FILE*>(file_));
+  file_ = nullptr;
+  std::remove(write_path_.c_str());
+}
+
+}  // namespace fl

@@ -1,0 +1,196 @@
+#include "fusionloc/common/lcm_interface.hpp"
+
+#include <gtest/gtest.h>
+#include <lcm/lcm-cpp.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "bot_core/planar_lidar_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
+#include "test_paths.hpp"
+
+namespace fl {
+namespace {
+
+bot_core::planar_lidar_t MakeScan(int64_t utime, int n) {
+  bot_core::planar_lidar_t m;
+  m.utime = utime;
+  m.nranges = n;
+  m.ranges.assign(n, 1.5f);
+  m.nintensities = 0;
+  m.rad0 = -1.0f;
+  m.radstep = 0.01f;
+  return m;
+}
+
+TEST(LcmInterface, MemqPublishSubscribeTyped) {
+  auto lcm = MakeLcm("memq://");
+  std::vector<int64_t> got;
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER", [&](const bot_core::planar_lidar_t& m, const std::string& ch) {
+        EXPECT_EQ(ch, "LASER");
+        EXPECT_EQ(m.nranges, 10);
+        got.push_back(m.utime);
+      });
+  for (int i = 0; i < 3; ++i) lcm->Publish("LASER", MakeScan(100 + i, 10));
+  lcm->Publish("OTHER", MakeScan(999, 10));
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  EXPECT_EQ(got, (std::vector<int64_t>{100, 101, 102}));
+  EXPECT_EQ(lcm->messages_published(), 4);
+}
+
+TEST(LcmInterface, MalformedMessageIsCountedNotDelivered) {
+  auto lcm = MakeLcm("memq://");
+  int delivered = 0;
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER", [&](const bot_core::planar_lidar_t&, const std::string&) { ++delivered; });
+  // A wheel odometry message on the laser channel, and random bytes.
+  fusionloc::wheel_odometry_t odo{};
+  lcm->Publish("LASER", odo);
+  const uint8_t junk[5] = {1, 2, 3, 4, 5};
+  lcm->PublishRaw("LASER", junk, 5, 0);
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  EXPECT_EQ(delivered, 0);
+  EXPECT_EQ(lcm->decode_errors(), 2);
+}
+
+TEST(LcmInterface, RegexSubscription) {
+  auto lcm = MakeLcm("memq://");
+  int n = 0;
+  lcm->SubscribeRaw("STATUS_.*", [&](const std::string&, const void*, int, Utime) { ++n; });
+  const uint8_t b = 0;
+  lcm->PublishRaw("STATUS_SIM", &b, 1, 0);
+  lcm->PublishRaw("STATUS_VO", &b, 1, 0);
+  lcm->PublishRaw("XSTATUS_VO", &b, 1, 0);
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  EXPECT_EQ(n, 2);
+}
+
+TEST(LcmInterface, BadUrlIsAClearError) {
+  try {
+    MakeLcm("tcp://nowhere");
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("unsupported LCM URL 'tcp://nowhere'"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(MakeLcm("log:/no/such/file.lcmlog"), std::runtime_error);
+}
+
+TEST(LcmLog, WriteReadRoundTripAndLcmCompatibility) {
+  test::TempDir dir;
+  const std::string path = dir.file("a.lcmlog");
+  {
+    LcmLogWriter w(path);
+    for (int i = 0; i < 5; ++i) w.Write("LASER", MakeScan(i * 100000, 20), i * 100000);
+    // Until closed the log is written beside its final name, never passed off as whole.
+    EXPECT_FALSE(std::filesystem::exists(path));
+    w.Close();
+  }
+  ASSERT_TRUE(std::filesystem::exists(path));
+
+  LcmLogReader r(path);
+  LcmLogEvent e;
+  int n = 0;
+  while (r.Next(&e)) {
+    EXPECT_EQ(e.channel, "LASER");
+    EXPECT_EQ(e.utime, n * 100000);
+    bot_core::planar_lidar_t m;
+    EXPECT_EQ(m.decode(e.data.data(), 0, e.data.size()), static_cast<int>(e.data.size()));
+    ++n;
+  }
+  EXPECT_EQ(n, 5);
+  EXPECT_TRUE(r.ProblemSummary().empty());
+
+  // LCM's own reader (the one lcm-logplayer uses) reads the same file.
+  lcm::LogFile lf(path, "r");
+  ASSERT_TRUE(lf.good());
+  int m = 0;
+  while (const lcm::LogEvent* ev = lf.readNextEvent()) {
+    EXPECT_EQ(ev->channel, "LASER");
+    ++m;
+  }
+  EXPECT_EQ(m, 5);
+}
+
+TEST(LcmLog, TruncatedAndCorruptLogsAreReported) {
+  test::TempDir dir;
+  const std::string path = dir.file("b.lcmlog");
+  {
+    LcmLogWriter w(path);
+    for (int i = 0; i < 3; ++i) w.Write("LASER", MakeScan(i, 50), i);
+  }
+  const auto size = std::filesystem::file_size(path);
+  // Corrupt: insert junk between events 1 and 2; truncate: cut the last event short.
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const size_t event_size = size / 3;
+  std::string damaged = bytes.substr(0, event_size) + "JUNKJUNK" + bytes.substr(event_size);
+  damaged.resize(damaged.size() - 10);
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << damaged;
+  }
+  LcmLogReader r(path);
+  LcmLogEvent e;
+  int n = 0;
+  while (r.Next(&e)) ++n;
+  EXPECT_EQ(n, 2);
+  EXPECT_EQ(r.corrupt_bytes_skipped(), 8);
+  EXPECT_TRUE(r.truncated());
+  EXPECT_NE(r.ProblemSummary().find("truncated"), std::string::npos);
+}
+
+TEST(LcmLog, ReplayDispatchesAndWritesOutputsWithLogTime) {
+  test::TempDir dir;
+  const std::string in = dir.file("in.lcmlog"), out = dir.file("out.lcmlog");
+  {
+    LcmLogWriter w(in);
+    for (int i = 0; i < 4; ++i) w.Write("LASER", MakeScan(1000 + i, 5), 1000 + i);
+    w.Write("ODOM", fusionloc::wheel_odometry_t{}, 2000);
+  }
+  {
+    auto lcm = MakeLcm("log:" + in + "," + out);
+    int scans = 0;
+    lcm->Subscribe<bot_core::planar_lidar_t>(
+        "LASER", [&](const bot_core::planar_lidar_t& m, const std::string&) {
+          ++scans;
+          fusionloc::wheel_odometry_t echo{};
+          echo.utime = m.utime;
+          lcm->Publish("ECHO", echo, 0);
+        });
+    while (lcm->HandleSubscriptions(0) >= 0) {
+    }
+    EXPECT_EQ(scans, 4);
+    EXPECT_EQ(lcm->messages_received(), 5);
+  }
+  LcmLogReader r(out);
+  LcmLogEvent e;
+  std::vector<Utime> times;
+  while (r.Next(&e)) {
+    EXPECT_EQ(e.channel, "ECHO");
+    times.push_back(e.utime);
+  }
+  EXPECT_EQ(times, (std::vector<Utime>{1000, 1001, 1002, 1003}));
+}
+
+TEST(LcmLog, AbandonLeavesNoFile) {
+  test::TempDir dir;
+  const std::string path = dir.file("c.lcmlog");
+  LcmLogWriter w(path);
+  w.Write("X", "abc", 3, 0);
+  w.Abandon();
+  EXPECT_FALSE(std::filesystem::exists(path));
+  EXPECT_FALSE(std::filesystem::exists(path + ".partial"));
+}
+
+}  // namespace
+}  // namespace fl
