@@ -1,0 +1,50 @@
+// Publishes a process's fusionloc.status_t about once per second on STATUS_<NAME>.
+//
+//   fl::StatusReporter status(lcm.get(), "fl-rbpf-slam");
+//   status.CountIn(); ... status.CountOut(); status.CountDropped("time went backwards");
+//   status.Set("particles", 30);
+//   status.Tick();   // call often; publishes when the period has passed
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+
+#include "fusionloc/common/lcm_interface.hpp"
+
+namespace fl {
+
+class StatusReporter {
+ public:
+  StatusReporter(LcmInterface* lcm, std::string process, double period_s = 1.0);
+
+  void CountIn() { ++in_; }
+  void CountOut() { ++out_; }
+  // Counts a rejected input and keeps the reason as the status message (level WARN).
+  void CountDropped(const std::string& reason);
+  // Adds processing time of one item, for the cpu_ms_per_item field.
+  void AddItemTime(double ms);
+  void Set(const std::string& key, double value) { values_[key] = value; }
+  // level: fusionloc::status_t::LEVEL_*; message shown in lcm-spy.
+  void SetState(int level, const std::string& message);
+
+  // Publishes if `period_s` has passed since the last report (or if force).
+  void Tick(bool force = false);
+  std::string channel() const { return channel_; }
+  int64_t dropped() const { return dropped_; }
+
+ private:
+  LcmInterface* lcm_;
+  std::string process_;
+  std::string channel_;
+  double period_s_;
+  int64_t in_ = 0, out_ = 0, dropped_ = 0;
+  double item_ms_sum_ = 0.0;
+  int64_t item_count_ = 0;
+  int level_ = 3;  // STARTING
+  std::string message_ = "starting";
+  std::map<std::string, double> values_;
+  Utime last_publish_ = 0;
+};
+
+}  // namespace fl

@@ -1,0 +1,55 @@
+#include "fusionloc/common/status_reporter.hpp"
+
+#include <cctype>
+
+#include "fusionloc/common/channels.hpp"
+#include "fusionloc/status_t.hpp"
+
+namespace fl {
+
+StatusReporter::StatusReporter(LcmInterface* lcm, std::string process, double period_s)
+    : lcm_(lcm), process_(std::move(process)), period_s_(period_s) {
+  channel_ = channels::kStatusPrefix;
+  for (char c : process_) channel_ += std::isalnum(static_cast<unsigned char>(c)) ? std::toupper(c) : '_';
+}
+
+void StatusReporter::CountDropped(const std::string& reason) {
+  ++dropped_;
+  level_ = fusionloc::status_t::LEVEL_WARN;
+  message_ = reason;
+}
+
+void StatusReporter::AddItemTime(double ms) {
+  item_ms_sum_ += ms;
+  ++item_count_;
+}
+
+void StatusReporter::SetState(int level, const std::string& message) {
+  level_ = level;
+  message_ = message;
+}
+
+void StatusReporter::Tick(bool force) {
+  const Utime now = NowUtime();
+  if (!force && UtimeToSeconds(now - last_publish_) < period_s_) return;
+  last_publish_ = now;
+  fusionloc::status_t st;
+  st.utime = now;
+  st.process = process_;
+  st.level = static_cast<int8_t>(level_);
+  st.message = message_;
+  st.messages_in = in_;
+  st.messages_out = out_;
+  st.messages_dropped = dropped_;
+  st.cpu_ms_per_item = item_count_ > 0 ? item_ms_sum_ / item_count_ : 0.0;
+  item_ms_sum_ = 0.0;
+  item_count_ = 0;
+  st.num_keys = static_cast<int32_t>(values_.size());
+  for (const auto& kv : values_) {
+    st.keys.push_back(kv.first);
+    st.values.push_back(kv.second);
+  }
+  lcm_->Publish(channel_, st, now);
+}
+
+}  // namespace fl
