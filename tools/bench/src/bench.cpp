@@ -302,4 +302,28 @@ void Progress::Finish() {
                static_cast<long long>(total_), (NowUs() - start_us_) * 1e-6);
 }
 
+void AddCommonFlags(CommandLine* cli, CommonArgs* args, const std::string& bench_name) {
+  if (args->data_dir.empty()) args->data_dir = FL_DEFAULT_SHARED_DATA_DIR;
+  if (args->json.empty()) args->json = "out/bench/" + bench_name + ".json";
+  if (args->command.empty()) args->command = "fl-bench-" + bench_name;
+  cli->AddFlag("data", &args->data_dir, "folder with the input data");
+  cli->AddFlag("json", &args->json, "where to write the JSON results");
+  cli->AddFlag("record", &args->record,
+               "markdown file whose section for this benchmark is replaced with the results "
+               "(./fusionloc bench passes docs/BENCHMARKS.md)");
+  cli->AddFlag("command", &args->command, "command line to record beside the results");
+}
+
+void Publish(const Report& report, const CommonArgs& args) {
+  report.PrintTable(std::cout);
+  if (!args.json.empty()) {
+    report.WriteJson(args.json, args.command);
+    std::cout << "JSON: " << args.json << "\n";
+  }
+  if (!args.record.empty()) {
+    report.RecordInMarkdown(args.record, args.command);
+    std::cout << "recorded in " << args.record << "\n";
+  }
+}
+
 }  // namespace fl::bench

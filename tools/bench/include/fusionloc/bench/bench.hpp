@@ -18,6 +18,8 @@
 #include <utility>
 #include <vector>
 
+#include "fusionloc/common/command_line.hpp"
+
 namespace fl::bench {
 
 struct Run {
@@ -99,5 +101,12 @@ struct CommonArgs {
   std::string record;    // --record FILE.md: update this markdown file (empty: don't)
   std::string command;   // the command line that produced the results, for the record
 };
+
+// Registers --data, --json, --record and --command on a program's command line, with the
+// defaults used by `./fusionloc bench NAME`.
+void AddCommonFlags(CommandLine* cli, CommonArgs* args, const std::string& bench_name);
+
+// Prints the table, writes the JSON and, if args.record is set, the markdown section.
+void Publish(const Report& report, const CommonArgs& args);
 
 }  // namespace fl::bench
