@@ -96,7 +96,8 @@ void CommandLine::AddPositional(const std::string& name, std::string* value,
 std::string CommandLine::Help() const {
   std::ostringstream s;
   s << "Usage: " << program_ << " [options]";
-  for (const auto& p : positionals_) s << (p.required ? " " : " [") << p.name << (p.required ? "" : "]");
+  for (const auto& p : positionals_)
+    s << (p.required ? " " : " [") << p.name << (p.required ? "" : "]");
   s << "\n\n" << description_ << "\n";
   if (!positionals_.empty()) {
     s << "\nArguments:\n";
@@ -150,8 +151,8 @@ bool CommandLine::Parse(int argc, char** argv) {
         value = argv[++i];
       }
       if (!flag->set(value)) {
-        std::cerr << program_ << ": bad value '" << value << "' for option '--" << name
-                  << "' (" << flag->help << ")\n";
+        std::cerr << program_ << ": bad value '" << value << "' for option '--" << name << "' ("
+                  << flag->help << ")\n";
         exit_code_ = 2;
         return false;
       }

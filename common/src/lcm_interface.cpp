@@ -1,10 +1,9 @@
 #include "fusionloc/common/lcm_interface.hpp"
 
-#include <lcm/lcm-cpp.hpp>
-
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <lcm/lcm-cpp.hpp>
 #include <regex>
 #include <stdexcept>
 
@@ -48,7 +47,8 @@ class LcmLive final : public LcmInterface {
   void PublishRaw(const std::string& channel, const void* data, int size, Utime) override {
     if (lcm_.publish(channel, data, static_cast<unsigned int>(size)) != 0) {
       publish_warning_.Warn("LCM publish failed on channel '" + channel + "' (" +
-                            std::to_string(size) + " bytes); is the message larger than the "
+                            std::to_string(size) +
+                            " bytes); is the message larger than the "
                             "transport allows?");
       return;
     }
@@ -250,8 +250,8 @@ LcmLogWriter::LcmLogWriter(const std::string& path, bool atomic)
     : path_(path), write_path_(atomic ? path + ".partial" : path) {
   FILE* f = std::fopen(write_path_.c_str(), "wb");
   if (!f) {
-    throw std::runtime_error("cannot write LCM log '" + write_path_ + "': " +
-                             std::strerror(errno) + " (does the folder exist and is it writable?)");
+    throw std::runtime_error("cannot write LCM log '" + write_path_ + "': " + std::strerror(errno) +
+                             " (does the folder exist and is it writable?)");
   }
   file_ = f;
 }
@@ -278,8 +278,8 @@ void LcmLogWriter::Write(const std::string& channel, const void* data, int size,
   if (std::fwrite(header, 1, 28, f) != 28 ||
       std::fwrite(channel.data(), 1, channel.size(), f) != channel.size() ||
       (size > 0 && std::fwrite(data, 1, size_t(size), f) != size_t(size))) {
-    throw std::runtime_error("write error on LCM log '" + write_path_ + "': " +
-                             std::strerror(errno) + " (disk full?)");
+    throw std::runtime_error("write error on LCM log '" + write_path_ +
+                             "': " + std::strerror(errno) + " (disk full?)");
   }
   ++next_event_;
 }
@@ -292,12 +292,12 @@ void LcmLogWriter::Close() {
   const bool closed = std::fclose(f) == 0;
   if (!ok || !closed) {
     std::remove(write_path_.c_str());
-    throw std::runtime_error("cannot finish LCM log '" + write_path_ + "': " +
-                             std::strerror(errno));
+    throw std::runtime_error("cannot finish LCM log '" + write_path_ +
+                             "': " + std::strerror(errno));
   }
   if (write_path_ != path_ && std::rename(write_path_.c_str(), path_.c_str()) != 0) {
-    throw std::runtime_error("cannot rename '" + write_path_ + "' to '" + path_ + "': " +
-                             std::strerror(errno));
+    throw std::runtime_error("cannot rename '" + write_path_ + "' to '" + path_ +
+                             "': " + std::strerror(errno));
   }
 }
 

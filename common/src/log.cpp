@@ -18,11 +18,16 @@ LogLevel GetLogLevel() { return g_level; }
 void SetLogProcessName(const std::string& name) { g_process = name; }
 
 bool ParseLogLevel(const std::string& text, LogLevel* level) {
-  if (text == "debug") *level = LogLevel::DEBUG;
-  else if (text == "info") *level = LogLevel::INFO;
-  else if (text == "warn" || text == "warning") *level = LogLevel::WARN;
-  else if (text == "error") *level = LogLevel::ERROR;
-  else return false;
+  if (text == "debug")
+    *level = LogLevel::DEBUG;
+  else if (text == "info")
+    *level = LogLevel::INFO;
+  else if (text == "warn" || text == "warning")
+    *level = LogLevel::WARN;
+  else if (text == "error")
+    *level = LogLevel::ERROR;
+  else
+    return false;
   return true;
 }
 

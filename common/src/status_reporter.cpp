@@ -10,7 +10,8 @@ namespace fl {
 StatusReporter::StatusReporter(LcmInterface* lcm, std::string process, double period_s)
     : lcm_(lcm), process_(std::move(process)), period_s_(period_s) {
   channel_ = channels::kStatusPrefix;
-  for (char c : process_) channel_ += std::isalnum(static_cast<unsigned char>(c)) ? std::toupper(c) : '_';
+  for (char c : process_)
+    channel_ += std::isalnum(static_cast<unsigned char>(c)) ? std::toupper(c) : '_';
 }
 
 void StatusReporter::CountDropped(const std::string& reason) {

@@ -15,8 +15,8 @@ std::string ClosestKey(const std::string& key, const std::vector<std::string>& k
     for (size_t i = 1; i <= key.size(); ++i) {
       cur[0] = i;
       for (size_t j = 1; j <= k.size(); ++j) {
-        cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1,
-                           prev[j - 1] + (key[i - 1] == k[j - 1] ? 0 : 1)});
+        cur[j] =
+            std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (key[i - 1] == k[j - 1] ? 0 : 1)});
       }
       std::swap(prev, cur);
     }

@@ -44,7 +44,8 @@ TEST(Bench, JsonHasTheCommonShape) {
 TEST(Bench, RecordReplacesOnlyItsOwnSection) {
   test::TempDir dir;
   const std::string md = dir.file("B.md");
-  std::ofstream(md) << "# Benchmarks\n\nintro\n\n<!-- bench:other:begin -->\nX\n<!-- bench:other:end -->\n";
+  std::ofstream(md)
+      << "# Benchmarks\n\nintro\n\n<!-- bench:other:begin -->\nX\n<!-- bench:other:end -->\n";
   MakeReport(0.5).RecordInMarkdown(md, "cmd1");
   MakeReport(0.25).RecordInMarkdown(md, "cmd2");
   std::ifstream in(md);

@@ -35,8 +35,8 @@ TEST(Geometry, RollPitchYawRoundTrip) {
   EXPECT_NEAR(rpy.x(), 0.1, 1e-12);
   EXPECT_NEAR(rpy.y(), -0.2, 1e-12);
   EXPECT_NEAR(rpy.z(), 2.5, 1e-12);
-  EXPECT_NEAR(RotationAngle(Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized())
-                                .toRotationMatrix()),
+  EXPECT_NEAR(RotationAngle(
+                  Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix()),
               0.7, 1e-12);
   double t[3], q[4];
   Eigen::Isometry3d iso = Eigen::Isometry3d::Identity();

@@ -1,11 +1,11 @@
 #include "fusionloc/common/lcm_interface.hpp"
 
 #include <gtest/gtest.h>
-#include <lcm/lcm-cpp.hpp>
 
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <lcm/lcm-cpp.hpp>
 
 #include "bot_core/planar_lidar_t.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"

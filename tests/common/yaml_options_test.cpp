@@ -38,7 +38,8 @@ struct DemoOptions {
     a->Visit("matcher", &matcher);
   }
   Status Validate() const {
-    if (particles < 1) return Status::Error("particles must be >= 1, got " + std::to_string(particles));
+    if (particles < 1)
+      return Status::Error("particles must be >= 1, got " + std::to_string(particles));
     return Status::Ok();
   }
 };

@@ -2,11 +2,11 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <string>
-#include <unistd.h>
 
 namespace fl::test {
 
@@ -34,8 +34,8 @@ class TempDir {
 };
 
 // Skips the test (with the reason) when shared data is not present.
-#define FL_REQUIRE_SHARED_FILE(path)                                              \
-  do {                                                                            \
+#define FL_REQUIRE_SHARED_FILE(path)                                                       \
+  do {                                                                                     \
     if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data missing: " << (path); \
   } while (0)
 

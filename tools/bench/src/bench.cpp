@@ -29,10 +29,18 @@ std::string JsonEscape(const std::string& s) {
   std::string o;
   for (char c : s) {
     switch (c) {
-      case '"': o += "\\\""; break;
-      case '\\': o += "\\\\"; break;
-      case '\n': o += "\\n"; break;
-      case '\t': o += "\\t"; break;
+      case '"':
+        o += "\\\"";
+        break;
+      case '\\':
+        o += "\\\\";
+        break;
+      case '\n':
+        o += "\\n";
+        break;
+      case '\t':
+        o += "\\t";
+        break;
       default:
         if (static_cast<unsigned char>(c) < 0x20) {
           char buf[8];
@@ -194,8 +202,8 @@ std::string Report::Markdown(const std::string& command) const {
   std::ostringstream s;
   s << "## bench " << bench_ << "\n\n";
   s << "Command: `" << command << "`  \n";
-  s << "Machine: " << m.cpu << ", " << m.cores << " cores, " << FormatValue(m.memory_gb)
-    << " GB; " << m.compiler << "; " << m.build_type << "; " << m.date << "\n\n";
+  s << "Machine: " << m.cpu << ", " << m.cores << " cores, " << FormatValue(m.memory_gb) << " GB; "
+    << m.compiler << "; " << m.build_type << "; " << m.date << "\n\n";
   s << "| run |";
   for (const auto& k : keys) s << " " << k << " |";
   s << "\n|---|";

@@ -5,9 +5,9 @@
 namespace fl::channels {
 
 // ---- sensors (drivers, simulator, importers) ----
-constexpr const char* kLaser = "LASER";                     // bot_core.planar_lidar_t
-constexpr const char* kOdometry = "ODOMETRY";               // fusionloc.wheel_odometry_t
-constexpr const char* kStereo = "STEREO";                   // bot_core.images_t (LEFT, RIGHT)
+constexpr const char* kLaser = "LASER";                           // bot_core.planar_lidar_t
+constexpr const char* kOdometry = "ODOMETRY";                     // fusionloc.wheel_odometry_t
+constexpr const char* kStereo = "STEREO";                         // bot_core.images_t (LEFT, RIGHT)
 constexpr const char* kStereoCalibration = "STEREO_CALIBRATION";  // fusionloc.stereo_calibration_t
 // Reference pose of the base in the world frame (simulator truth, KITTI OXTS poses, CARMEN
 // corrected poses): bot_core.pose_t. Never read by an estimator.
@@ -20,14 +20,14 @@ constexpr const char* kRbpfMap = "RBPF_MAP";                // fusionloc.occupan
 constexpr const char* kRbpfTrajectory = "RBPF_TRAJECTORY";  // fusionloc.trajectory_t
 
 // ---- stereo visual odometry ----
-constexpr const char* kVoPose = "VO_POSE";                  // bot_core.pose_t
-constexpr const char* kVoFactors = "VO_FACTORS";            // fusionloc.relative_pose_factor_t
-constexpr const char* kVoPoints = "VO_POINTS";              // fusionloc.point_cloud_t (keyframe, camera frame)
+constexpr const char* kVoPose = "VO_POSE";        // bot_core.pose_t
+constexpr const char* kVoFactors = "VO_FACTORS";  // fusionloc.relative_pose_factor_t
+constexpr const char* kVoPoints = "VO_POINTS";  // fusionloc.point_cloud_t (keyframe, camera frame)
 
 // ---- fusion ----
-constexpr const char* kFusedPose = "FUSED_POSE";            // fusionloc.fused_pose_t
+constexpr const char* kFusedPose = "FUSED_POSE";              // fusionloc.fused_pose_t
 constexpr const char* kFusedTrajectory = "FUSED_TRAJECTORY";  // fusionloc.trajectory_t
-constexpr const char* kFusedMap = "FUSED_MAP";              // fusionloc.point_cloud_t (map frame)
+constexpr const char* kFusedMap = "FUSED_MAP";                // fusionloc.point_cloud_t (map frame)
 
 // ---- health: STATUS_<PROCESS>, e.g. STATUS_FL_SIM; subscribe "STATUS_.*" for all ----
 constexpr const char* kStatusPrefix = "STATUS_";

@@ -4,9 +4,10 @@
 //  - a process can replay an LCM log file and write its outputs to another log at full speed,
 // all through the same subscribe/publish/handle code path.
 //
-//   auto lcm = fl::MakeLcm(url);          // "udpm://...", "memq://", or "log:IN.lcmlog[,OUT.lcmlog]"
-//   lcm->Subscribe<bot_core::planar_lidar_t>("LASER", [&](const auto& msg, const auto& ch) {...});
-//   while (!fl::ShutdownRequested() && lcm->HandleSubscriptions(100) >= 0) {}
+//   auto lcm = fl::MakeLcm(url);          // "udpm://...", "memq://", or
+//   "log:IN.lcmlog[,OUT.lcmlog]" lcm->Subscribe<bot_core::planar_lidar_t>("LASER", [&](const auto&
+//   msg, const auto& ch) {...}); while (!fl::ShutdownRequested() && lcm->HandleSubscriptions(100)
+//   >= 0) {}
 //
 // Typed subscriptions decode each message; a message that fails to decode (wrong type,
 // truncated) is counted, reported with a rate-limited warning naming the channel and type,
@@ -70,19 +71,18 @@ class LcmInterface {
   template <class Msg>
   void Subscribe(const std::string& channel_regex,
                  std::function<void(const Msg& msg, const std::string& channel)> handler) {
-    SubscribeRaw(channel_regex,
-                 [this, handler](const std::string& channel, const void* data, int size, Utime) {
-                   Msg msg;
-                   if (msg.decode(data, 0, size) != size) {
-                     decode_warning_.Warn("channel '" + channel + "': a message of " +
-                                          std::to_string(size) + " bytes does not decode as " +
-                                          Msg::getTypeName() +
-                                          " (wrong type or truncated); check that the sender "
-                                          "uses the same lcmtypes");
-                     return;
-                   }
-                   handler(msg, channel);
-                 });
+    SubscribeRaw(channel_regex, [this, handler](const std::string& channel, const void* data,
+                                                int size, Utime) {
+      Msg msg;
+      if (msg.decode(data, 0, size) != size) {
+        decode_warning_.Warn("channel '" + channel + "': a message of " + std::to_string(size) +
+                             " bytes does not decode as " + Msg::getTypeName() +
+                             " (wrong type or truncated); check that the sender "
+                             "uses the same lcmtypes");
+        return;
+      }
+      handler(msg, channel);
+    });
   }
 
  protected:

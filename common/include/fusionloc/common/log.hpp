@@ -56,7 +56,7 @@ struct LogVoidify {
 };
 }  // namespace fl::internal
 
-#define FL_LOG(level)                                    \
-  (::fl::LogLevel::level < ::fl::GetLogLevel())          \
-      ? (void)0                                          \
+#define FL_LOG(level)                           \
+  (::fl::LogLevel::level < ::fl::GetLogLevel()) \
+      ? (void)0                                 \
       : ::fl::internal::LogVoidify() & ::fl::LogMessage(::fl::LogLevel::level).stream()

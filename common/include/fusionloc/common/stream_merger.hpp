@@ -45,9 +45,8 @@ class StreamMerger {
   Status Push(int stream, Utime utime, T value) {
     Stream& s = streams_.at(static_cast<size_t>(stream));
     if (utime < s.last_utime) {
-      return Status::Error("stream '" + s.name + "': time went backwards (" +
-                           FormatUtime(utime) + " after " + FormatUtime(s.last_utime) +
-                           "); message dropped");
+      return Status::Error("stream '" + s.name + "': time went backwards (" + FormatUtime(utime) +
+                           " after " + FormatUtime(s.last_utime) + "); message dropped");
     }
     if (utime < released_utime_) {
       return Status::Error("stream '" + s.name + "': message at " + FormatUtime(utime) +

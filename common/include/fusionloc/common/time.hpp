@@ -13,7 +13,9 @@ using Utime = int64_t;  // [us]
 constexpr Utime kUtimePerSecond = 1000000;
 
 inline double UtimeToSeconds(Utime t) { return static_cast<double>(t) * 1e-6; }
-inline Utime SecondsToUtime(double s) { return static_cast<Utime>(s * 1e6 + (s >= 0 ? 0.5 : -0.5)); }
+inline Utime SecondsToUtime(double s) {
+  return static_cast<Utime>(s * 1e6 + (s >= 0 ? 0.5 : -0.5));
+}
 
 // Wall-clock time now.
 inline Utime NowUtime() {

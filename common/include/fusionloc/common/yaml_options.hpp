@@ -57,8 +57,8 @@ struct YamlProbeArchive {
 template <class T, class = void>
 struct HasValidate : std::false_type {};
 template <class T>
-struct HasValidate<T, std::void_t<decltype(std::declval<const T&>().Validate())>>
-    : std::true_type {};
+struct HasValidate<T, std::void_t<decltype(std::declval<const T&>().Validate())>> : std::true_type {
+};
 
 template <class T>
 struct IsVector : std::false_type {};

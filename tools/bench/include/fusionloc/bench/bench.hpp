@@ -23,10 +23,10 @@
 namespace fl::bench {
 
 struct Run {
-  std::string name;   // e.g. "intel-corrected"
-  std::string input;  // path of the data
+  std::string name;                                     // e.g. "intel-corrected"
+  std::string input;                                    // path of the data
   std::vector<std::pair<std::string, double>> metrics;  // in insertion (column) order
-  std::string note;   // free text for the markdown table (e.g. "target <= 0.05 m: met")
+  std::string note;  // free text for the markdown table (e.g. "target <= 0.05 m: met")
 
   Run& Add(const std::string& key, double value) {
     metrics.emplace_back(key, value);
