@@ -1,0 +1,100 @@
+// KITTI stereo folders into LCM logs.
+//
+// Two layouts are recognised:
+//   raw drive (…_sync):  image_00/data/*.png (left), image_01/data/*.png (right), each with
+//                        timestamps.txt ("2011-09-26 13:02:25.967790592", UTC);
+//                        calib_cam_to_cam.txt (S_rect_00/01, P_rect_00/01);
+//                        ground truth from poses_cam0_from_oxts.txt or --poses FILE.
+//   odometry sequence:   image_0/*.png + image_1/*.png (gray) or image_2 + image_3 (colour,
+//                        converted to gray); calib.txt (P0..P3); times.txt (seconds from the
+//                        start; utime = kKittiOdometryEpochUtime + seconds);
+//                        ground truth from --poses FILE (poses/NN.txt).
+// Pose files: one line per frame, 12 numbers = row-major 3x4 T_cam0start_cam0(frame).
+//
+// Output channels:
+//   STEREO_CALIBRATION  fusionloc.stereo_calibration_t, before the first frame and again every
+//                       calibration_period_s (so a late subscriber gets it).
+//   STEREO              bot_core.images_t: LEFT (0) then RIGHT (1), 8-bit GRAY, row_stride =
+//                       width, utime = the left image's time stamp.
+//   GROUND_TRUTH        bot_core.pose_t per frame: T_world_base with world = the base frame
+//                       at the first converted frame, T_world_base = R_bc * T_c0_ci * R_bc^-1
+//                       (R_bc: optical camera frame -> base frame; see kRotationBaseCamera).
+#pragma once
+
+#include <Eigen/Geometry>
+#include <string>
+#include <vector>
+
+#include "fusionloc/common/status.hpp"
+#include "fusionloc/common/time.hpp"
+#include "fusionloc/importers/convert_summary.hpp"
+
+namespace fl::importers {
+
+// Epoch added to KITTI-odometry times.txt (seconds from the sequence start):
+// 2011-01-01T00:00:00Z, so the utimes look like (and never collide with) real dates.
+constexpr Utime kKittiOdometryEpochUtime = 1293840000LL * 1000000LL;
+
+struct KittiOptions {
+  int start_frame = 0;    // [frames] first frame to convert (0 = the first)
+  int max_frames = -1;    // [frames] at most this many frames (-1 = all)
+  // Ground-truth pose file (12 numbers a line). "" = <folder>/poses_cam0_from_oxts.txt if it
+  // exists, else none.
+  std::string poses_file;
+  // With no pose file: false = error (with the fix), true = convert without GROUND_TRUTH.
+  bool allow_no_ground_truth = false;
+  // Odometry sequences with both gray and colour images: "auto" (gray if present), "gray"
+  // (image_0/1) or "color" (image_2/3).
+  std::string cameras = "auto";
+  double calibration_period_s = 1.0;  // [s] republish STEREO_CALIBRATION (0 = only once)
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("start_frame", &start_frame);
+    a->Visit("max_frames", &max_frames);
+    a->Visit("poses_file", &poses_file);
+    a->Visit("allow_no_ground_truth", &allow_no_ground_truth);
+    a->Visit("cameras", &cameras);
+    a->Visit("calibration_period_s", &calibration_period_s);
+  }
+  Status Validate() const;
+};
+
+// Rotation taking optical-camera coordinates (x right, y down, z forward) to base coordinates
+// (x forward, y left, z up): p_base = R_bc * p_cam.
+Eigen::Matrix3d RotationBaseCamera();
+
+// A rectified stereo pair's calibration as read from a KITTI folder.
+struct KittiCalibration {
+  int width = 0, height = 0;                  // [px]
+  double fx = 0, fy = 0, cx = 0, cy = 0;      // [px]
+  double baseline = 0;                        // [m]
+  Eigen::Vector3d left_center_in_cam0 = Eigen::Vector3d::Zero();  // [m] left optical centre
+};
+
+// One folder, scanned and checked, before any image is read.
+struct KittiSequence {
+  std::string folder;
+  bool raw_layout = false;                 // true: raw drive, false: odometry sequence
+  std::vector<std::string> left_images;    // paths, in frame order
+  std::vector<std::string> right_images;
+  std::vector<Utime> utimes;               // [us] per frame (left camera)
+  KittiCalibration calibration;
+  std::string poses_path;                  // "" if none
+  std::vector<Eigen::Isometry3d> T_cam0start_cam0;  // per frame, empty if no poses
+};
+
+// Scans and validates a folder (layout, image lists, time stamps, calibration, poses).
+// Throws std::runtime_error naming the file (and line) and the fix on any inconsistency.
+KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& folder);
+
+// Parses "YYYY-MM-DD HH:MM:SS.fffffffff" (UTC) to microseconds since the epoch (rounded).
+// Returns false if the text is not in that form.
+bool ParseKittiTimestamp(const std::string& text, Utime* utime);
+
+// Converts a folder to the LCM log `out_log` (written to out_log.partial and renamed when
+// complete; on any error nothing is left at out_log and the exception is rethrown).
+ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& folder,
+                            const std::string& out_log);
+
+}  // namespace fl::importers
