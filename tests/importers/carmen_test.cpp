@@ -1,0 +1,385 @@
+#include "fusionloc/importers/carmen.hpp"
+
+#include <gtest/gtest.h>
+#include <zlib.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "bot_core/planar_lidar_t.hpp"
+#include "bot_core/pose_t.hpp"
+#include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
+#include "importer_fixtures.hpp"
+#include "test_paths.hpp"
+
+namespace fl::importers {
+namespace {
+
+namespace fs = std::filesystem;
+using fl::test::TempDir;
+
+std::string Laser(const std::string& name) { return fl::test::SharedDataDir() + "/laser/" + name; }
+
+// Converts and expects failure; returns the message. Checks nothing is left at `out`.
+std::string ExpectConvertError(const CarmenOptions& opts, const std::string& in,
+                               const std::string& out) {
+  std::string message;
+  try {
+    ConvertCarmen(opts, in, out);
+    ADD_FAILURE() << "conversion of " << in << " should have failed";
+  } catch (const std::exception& e) {
+    message = e.what();
+  }
+  EXPECT_FALSE(fs::exists(out)) << "half-written output left at " << out;
+  EXPECT_FALSE(fs::exists(out + ".partial")) << "partial output left at " << out;
+  return message;
+}
+
+TEST(CarmenTest, BeamStepFollowsCarmenConvention) {
+  const double deg = M_PI / 180.0;
+  EXPECT_NEAR(CarmenBeamStep(361, M_PI), 0.5 * deg, 1e-12);
+  EXPECT_NEAR(CarmenBeamStep(360, M_PI), 0.5 * deg, 1e-12);
+  EXPECT_NEAR(CarmenBeamStep(181, M_PI), 1.0 * deg, 1e-12);
+  EXPECT_NEAR(CarmenBeamStep(180, M_PI), 1.0 * deg, 1e-12);
+  EXPECT_NEAR(CarmenBeamStep(401, M_PI), 0.25 * deg, 1e-12);
+  EXPECT_NEAR(CarmenBeamStep(100, M_PI), M_PI / 99, 1e-12);
+  EXPECT_NEAR(CarmenBeamStep(100, 0.5 * M_PI), 0.5 * M_PI / 99, 1e-12);
+}
+
+TEST(CarmenTest, ConvertsRawMitCsailWithItsOwnOdometry) {
+  const std::string in = Laser("mit-csail.clf");
+  FL_REQUIRE_SHARED_FILE(in);
+  TempDir dir;
+  const std::string out = dir.file("csail.lcmlog");
+  const ConvertSummary s = ConvertCarmen(CarmenOptions{}, in, out);
+  EXPECT_EQ(s.messages.at(channels::kLaser), 1988);
+  EXPECT_EQ(s.messages.at(channels::kOdometry), 1988);
+  EXPECT_EQ(s.messages.count(channels::kGroundTruth), 0u);  // raw log: no reference here
+  const auto log = fl::test::ReadLog(out);
+  ASSERT_EQ(log.count(channels::kLaser), 1988u);
+  const auto scan = log.Decode<bot_core::planar_lidar_t>(channels::kLaser, 0);
+  EXPECT_EQ(scan.nranges, 361);
+  EXPECT_EQ(scan.nintensities, 0);
+  EXPECT_FLOAT_EQ(scan.rad0, static_cast<float>(-M_PI / 2));
+  EXPECT_FLOAT_EQ(scan.radstep, static_cast<float>(M_PI / 360));
+  EXPECT_FLOAT_EQ(scan.ranges[0], 1.40f);
+  EXPECT_EQ(scan.utime, 1134864629895182);  // ipc_timestamp of the first FLASER line
+  EXPECT_EQ(log.utimes.at(channels::kLaser)[0], scan.utime);
+  const auto odo = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, 0);
+  EXPECT_DOUBLE_EQ(odo.x, 576.536523);
+  EXPECT_DOUBLE_EQ(odo.y, 0.106594);
+  EXPECT_DOUBLE_EQ(odo.theta, -2.255213);
+  // Odometry precedes its scan; times never go backwards in this log.
+  EXPECT_EQ(log.channel_order[0], channels::kOdometry);
+  EXPECT_EQ(log.channel_order[1], channels::kLaser);
+  EXPECT_TRUE(s.warnings.empty());
+}
+
+TEST(CarmenTest, ConvertsEveryCorrectedLogWithGroundTruth) {
+  const std::vector<std::pair<std::string, int>> logs = {
+      {"intel-corrected.log.gz", 910}, {"aces-corrected.log.gz", 440},
+      {"csail-corrected.log.gz", 406}};
+  for (const auto& [name, scans] : logs) {
+    SCOPED_TRACE(name);
+    const std::string in = Laser(name);
+    FL_REQUIRE_SHARED_FILE(in);
+    TempDir dir;
+    const std::string out = dir.file("out.lcmlog");
+    const ConvertSummary s = ConvertCarmen(CarmenOptions{}, in, out);
+    EXPECT_EQ(s.messages.at(channels::kLaser), scans);
+    EXPECT_EQ(s.messages.at(channels::kOdometry), scans);
+    EXPECT_EQ(s.messages.at(channels::kGroundTruth), scans);
+    // The reference is the line's corrected pose; the odometry differs from it (noise).
+    const CarmenLog parsed = ReadCarmenLog(in);
+    const auto log = fl::test::ReadLog(out);
+    const size_t last = static_cast<size_t>(scans - 1);
+    const auto gt = log.Decode<bot_core::pose_t>(channels::kGroundTruth, last);
+    EXPECT_DOUBLE_EQ(gt.pos[0], parsed.scans[last].pose.x);
+    EXPECT_DOUBLE_EQ(gt.pos[1], parsed.scans[last].pose.y);
+    EXPECT_NEAR(2.0 * std::atan2(gt.orientation[3], gt.orientation[0]),
+                parsed.scans[last].pose.theta, 1e-9);
+    const auto odo = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, last);
+    EXPECT_GT(std::hypot(odo.x - gt.pos[0], odo.y - gt.pos[1]), 0.01);
+    const auto first = log.Decode<bot_core::planar_lidar_t>(channels::kLaser, 0);
+    EXPECT_FLOAT_EQ(first.rad0, static_cast<float>(-M_PI / 2));
+    EXPECT_FLOAT_EQ(first.radstep, static_cast<float>(first.nranges >= 360 ? M_PI / 360
+                                                                            : M_PI / 180));
+  }
+}
+
+TEST(CarmenTest, RecoversCsailCorrectedTimestampsFromTheRawLog) {
+  const std::string in = Laser("csail-corrected.log.gz");
+  const std::string raw = Laser("mit-csail.clf");
+  FL_REQUIRE_SHARED_FILE(in);
+  FL_REQUIRE_SHARED_FILE(raw);
+  TempDir dir;
+  // Without help: the log prints its stamps with 6 digits, so nearly all collide (warned).
+  const ConvertSummary plain = ConvertCarmen(CarmenOptions{}, in, dir.file("a.lcmlog"));
+  bool warned = false;
+  for (const auto& w : plain.warnings) warned |= w.find("--timestamps-from") != std::string::npos;
+  EXPECT_TRUE(warned);
+
+  CarmenOptions opts;
+  opts.timestamps_from = raw;
+  const ConvertSummary s = ConvertCarmen(opts, in, dir.file("b.lcmlog"));
+  EXPECT_EQ(s.messages.at(channels::kGroundTruth), 406);
+  const auto log = fl::test::ReadLog(dir.file("b.lcmlog"));
+  const auto& t = log.utimes.at(channels::kLaser);
+  ASSERT_EQ(t.size(), 406u);
+  EXPECT_EQ(t[0], 1134864642914187);  // raw scan 62 (line 64 of mit-csail.clf)
+  for (size_t i = 1; i < t.size(); ++i) ASSERT_GT(t[i], t[i - 1]) << "scan " << i;
+  EXPECT_EQ(log.utimes.at(channels::kGroundTruth), t);
+}
+
+TEST(CarmenTest, UnmatchedScanInTimestampRecoveryIsAnError) {
+  TempDir dir;
+  fl::test::WriteText(dir.file("raw.clf"), fl::test::CarmenArcLog(5));
+  std::string corrected = fl::test::CarmenArcLog(3);
+  corrected += fl::test::CarmenFlaser(181, 7.5, 1, 1, 0, 200);  // not in the raw log
+  fl::test::WriteText(dir.file("x-corrected.log"), corrected);
+  CarmenOptions opts;
+  opts.timestamps_from = dir.file("raw.clf");
+  const std::string msg =
+      ExpectConvertError(opts, dir.file("x-corrected.log"), dir.file("out.lcmlog"));
+  EXPECT_NE(msg.find("x-corrected.log:6:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("same ranges"), std::string::npos) << msg;
+}
+
+TEST(CarmenTest, CorrectedDetectionByNameOrOption) {
+  CarmenOptions o;
+  EXPECT_TRUE(IsCorrectedCarmenLog(o, "/x/intel-CORRECTED.log.gz"));
+  EXPECT_FALSE(IsCorrectedCarmenLog(o, "/corrected/mit-csail.clf"));  // the file name decides
+  o.noisy_odometry = "true";
+  EXPECT_TRUE(IsCorrectedCarmenLog(o, "raw.clf"));
+  o.noisy_odometry = "false";
+  EXPECT_FALSE(IsCorrectedCarmenLog(o, "intel-corrected.log"));
+}
+
+TEST(CarmenTest, RawLogKeepsOdomLinesInFileOrder) {
+  TempDir dir;
+  std::string text = fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.0, 1, 2, 0.1);
+  text += "ODOM 1.5 2.5 0.2 0.3 0.05 0 10.05 host 10.05\n";
+  text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.1, 2, 3, 0.3);
+  fl::test::WriteText(dir.file("small.log"), text);
+  const ConvertSummary s = ConvertCarmen(CarmenOptions{}, dir.file("small.log"), dir.file("o.lcmlog"));
+  EXPECT_EQ(s.messages.at(channels::kOdometry), 3);
+  EXPECT_EQ(s.messages.at(channels::kLaser), 2);
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  const std::vector<std::string> expected = {channels::kOdometry, channels::kLaser,
+                                             channels::kOdometry, channels::kOdometry,
+                                             channels::kLaser};
+  EXPECT_EQ(log.channel_order, expected);
+  const auto mid = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, 1);
+  EXPECT_DOUBLE_EQ(mid.x, 1.5);
+  EXPECT_DOUBLE_EQ(mid.v, 0.3);
+  EXPECT_DOUBLE_EQ(mid.omega, 0.05);
+  EXPECT_EQ(mid.utime, 10050000);
+  const auto last = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, 2);
+  EXPECT_DOUBLE_EQ(last.x, 2.0);
+  EXPECT_EQ(last.utime, 10100000);
+  EXPECT_NEAR(last.omega, 0.2 / 0.1, 1e-9);  // from consecutive scan odometry
+}
+
+TEST(CarmenTest, LoggerTimestampOption) {
+  TempDir dir;
+  fl::test::WriteText(dir.file("a.log"), fl::test::CarmenArcLog(2));
+  CarmenOptions opts;
+  opts.timestamp = "logger";
+  ConvertCarmen(opts, dir.file("a.log"), dir.file("o.lcmlog"));
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  EXPECT_EQ(log.utimes.at(channels::kLaser)[0], 100001000);  // 100.0 + 0.001 s
+}
+
+TEST(CarmenTest, NoiseIsDeterministicPerSeed) {
+  TempDir dir;
+  fl::test::WriteText(dir.file("arc-corrected.log"), fl::test::CarmenArcLog(50));
+  CarmenOptions opts;
+  opts.seed = 42;
+  ConvertCarmen(opts, dir.file("arc-corrected.log"), dir.file("a.lcmlog"));
+  ConvertCarmen(opts, dir.file("arc-corrected.log"), dir.file("b.lcmlog"));
+  opts.seed = 43;
+  ConvertCarmen(opts, dir.file("arc-corrected.log"), dir.file("c.lcmlog"));
+  const std::string a = fl::test::ReadFileBytes(dir.file("a.lcmlog"));
+  EXPECT_FALSE(a.empty());
+  EXPECT_EQ(a, fl::test::ReadFileBytes(dir.file("b.lcmlog")));
+  EXPECT_NE(a, fl::test::ReadFileBytes(dir.file("c.lcmlog")));
+}
+
+TEST(CarmenTest, NoiseHasTheDocumentedStatistics) {
+  // A straight drive of 0.2 m steps: per-step errors of the noisy increments must have
+  // sigma_xy = a1 * d and sigma_theta = a4 * d (no rotation), mean zero.
+  std::vector<Pose2> truth;
+  const int n = 20001;
+  for (int k = 0; k < n; ++k) truth.emplace_back(0.2 * k, 0.0, 0.0);
+  CarmenNoiseModel noise;
+  const std::vector<Pose2> odom = SynthesizeNoisyOdometry(noise, 7, truth);
+  ASSERT_EQ(odom.size(), truth.size());
+  EXPECT_DOUBLE_EQ(odom[0].x, truth[0].x);
+  double sx = 0, sxx = 0, syy = 0, stt = 0;
+  for (int k = 1; k < n; ++k) {
+    const Pose2 u = odom[k - 1].between(odom[k]);
+    const double ex = u.x - 0.2, ey = u.y, et = u.theta;
+    sx += ex;
+    sxx += ex * ex;
+    syy += ey * ey;
+    stt += et * et;
+  }
+  const double m = n - 1;
+  const double sigma_xy = noise.a1 * 0.2, sigma_th = noise.a4 * 0.2;
+  EXPECT_NEAR(sx / m, 0.0, 4.0 * sigma_xy / std::sqrt(m));
+  EXPECT_NEAR(std::sqrt(sxx / m), sigma_xy, 0.03 * sigma_xy);
+  EXPECT_NEAR(std::sqrt(syy / m), sigma_xy, 0.03 * sigma_xy);
+  EXPECT_NEAR(std::sqrt(stt / m), sigma_th, 0.03 * sigma_th);
+}
+
+TEST(CarmenTest, StandingStillGetsNoNoiseAndBiasIsApplied) {
+  std::vector<Pose2> truth(10, Pose2(1.0, 2.0, 0.5));
+  const auto still = SynthesizeNoisyOdometry(CarmenNoiseModel{}, 3, truth);
+  for (const auto& p : still) {
+    EXPECT_DOUBLE_EQ(p.x, 1.0);
+    EXPECT_DOUBLE_EQ(p.y, 2.0);
+    EXPECT_DOUBLE_EQ(p.theta, 0.5);
+  }
+  CarmenNoiseModel exact{};
+  exact.a1 = exact.a2 = exact.a3 = exact.a4 = exact.min_sigma_xy = exact.min_sigma_theta = 0;
+  exact.scale_error = 0.1;
+  exact.yaw_bias = 0.01;
+  const auto biased =
+      SynthesizeNoisyOdometry(exact, 3, {Pose2(0, 0, 0), Pose2(1, 0, 0), Pose2(2, 0, 0)});
+  EXPECT_NEAR(biased[1].x, 1.1, 1e-12);
+  EXPECT_NEAR(biased[1].theta, 0.01, 1e-12);
+  EXPECT_NEAR(biased[2].theta, 0.02, 1e-12);
+}
+
+TEST(CarmenTest, RawOptionKeepsTheLinesOdometry) {
+  TempDir dir;
+  fl::test::WriteText(dir.file("b-corrected.log"), fl::test::CarmenArcLog(5));
+  CarmenOptions opts;
+  opts.noisy_odometry = "false";
+  const ConvertSummary s = ConvertCarmen(opts, dir.file("b-corrected.log"), dir.file("o.lcmlog"));
+  EXPECT_EQ(s.messages.count(channels::kGroundTruth), 0u);
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  const CarmenLog parsed = ReadCarmenLog(dir.file("b-corrected.log"));
+  const auto odo = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, 4);
+  EXPECT_DOUBLE_EQ(odo.x, parsed.scans[4].odom.x);
+  EXPECT_DOUBLE_EQ(odo.theta, parsed.scans[4].odom.theta);
+}
+
+TEST(CarmenTest, TimeGoingBackwardsIsKeptAndCounted) {
+  TempDir dir;
+  std::string text = fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.0);
+  text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 9.5);
+  text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 9.5);
+  fl::test::WriteText(dir.file("t.log"), text);
+  const ConvertSummary s = ConvertCarmen(CarmenOptions{}, dir.file("t.log"), dir.file("o.lcmlog"));
+  ASSERT_EQ(s.warnings.size(), 2u);
+  EXPECT_NE(s.warnings[0].find("1 scans have a time stamp earlier"), std::string::npos);
+  EXPECT_NE(s.warnings[1].find("1 scans share the time stamp"), std::string::npos);
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  const std::vector<Utime> expected = {10000000, 9500000, 9500000};
+  EXPECT_EQ(log.utimes.at(channels::kLaser), expected);
+}
+
+// ---- bad input ----
+
+TEST(CarmenBadInputTest, TruncatedLineNamesFileAndLine) {
+  TempDir dir;
+  std::string text = fl::test::CarmenArcLog(3);  // lines 1-2 header, 3-5 scans
+  const std::string line = fl::test::CarmenFlaser(181, 2.0, 0, 0, 0, 50.0);
+  text += line.substr(0, line.size() / 2) + "\n";  // line 6: cut short
+  fl::test::WriteText(dir.file("cut.log"), text);
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("cut.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg.find(dir.file("cut.log") + ":6:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("truncated FLASER line"), std::string::npos) << msg;
+}
+
+TEST(CarmenBadInputTest, NonNumericField) {
+  TempDir dir;
+  std::string text = fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.0);
+  text += "FLASER 5 1.0 1.0 abc 1.0 1.0 0 0 0 0 0 0 11.0 host 11.0\n";
+  fl::test::WriteText(dir.file("nan.log"), text);
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("nan.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg.find("nan.log:2:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("'abc'"), std::string::npos) << msg;
+
+  fl::test::WriteText(dir.file("odom.log"),
+                      text.substr(0, text.find('\n') + 1) + "ODOM 1 2 x 0 0 0 1 h 1\n");
+  const std::string msg2 =
+      ExpectConvertError(CarmenOptions{}, dir.file("odom.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg2.find("odom.log:2: ODOM field 'theta'"), std::string::npos) << msg2;
+
+  fl::test::WriteText(dir.file("n.log"), "FLASER five 1 2 3 4 5 0 0 0 0 0 0 1 h 1\n");
+  const std::string msg3 =
+      ExpectConvertError(CarmenOptions{}, dir.file("n.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg3.find("n.log:1: FLASER beam count 'five'"), std::string::npos) << msg3;
+}
+
+TEST(CarmenBadInputTest, BeamCountDoesNotMatchN) {
+  TempDir dir;
+  // n says 4 but 5 ranges follow: one field too many.
+  fl::test::WriteText(dir.file("n.log"),
+                      "# c\nFLASER 4 1 1 1 1 1 0 0 0 0 0 0 10.0 host 10.0\n");
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("n.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg.find("n.log:2:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("n = 4 beams need 15"), std::string::npos) << msg;
+}
+
+TEST(CarmenBadInputTest, EmptyFileAndMissingFile) {
+  TempDir dir;
+  fl::test::WriteText(dir.file("empty.log"), "");
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("empty.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg.find("empty.log: no FLASER line"), std::string::npos) << msg;
+  fl::test::WriteText(dir.file("params.log"), "PARAM a 1 h 0\nPARAM b 2 h 0\n");
+  const std::string msg2 =
+      ExpectConvertError(CarmenOptions{}, dir.file("params.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg2.find("PARAM x2"), std::string::npos) << msg2;
+  const std::string msg3 =
+      ExpectConvertError(CarmenOptions{}, dir.file("nope.log"), dir.file("o.lcmlog"));
+  EXPECT_NE(msg3.find("nope.log: no such file"), std::string::npos) << msg3;
+}
+
+TEST(CarmenBadInputTest, TruncatedGzip) {
+  TempDir dir;
+  const std::string text = fl::test::CarmenArcLog(400);
+  {
+    gzFile gz = gzopen(dir.file("full.log.gz").c_str(), "wb");
+    ASSERT_NE(gz, nullptr);
+    ASSERT_EQ(gzwrite(gz, text.data(), static_cast<unsigned>(text.size())),
+              static_cast<int>(text.size()));
+    gzclose(gz);
+  }
+  const std::string bytes = fl::test::ReadFileBytes(dir.file("full.log.gz"));
+  // The whole file reads back the same through the gzip path.
+  EXPECT_EQ(ReadCarmenLog(dir.file("full.log.gz")).scans.size(), 400u);
+  fl::test::WriteText(dir.file("cut-corrected.log.gz"), bytes.substr(0, bytes.size() / 2));
+  const std::string msg = ExpectConvertError(CarmenOptions{}, dir.file("cut-corrected.log.gz"),
+                                             dir.file("o.lcmlog"));
+  EXPECT_NE(msg.find("cut-corrected.log.gz:"), std::string::npos) << msg;
+  EXPECT_TRUE(msg.find("truncated") != std::string::npos) << msg;
+}
+
+TEST(CarmenBadInputTest, InvalidOptions) {
+  CarmenOptions o;
+  o.noisy_odometry = "maybe";
+  EXPECT_NE(o.Validate().message().find("noisy_odometry"), std::string::npos);
+  o = CarmenOptions{};
+  o.noise.a1 = -1;
+  EXPECT_NE(o.Validate().message().find("noise.a1"), std::string::npos);
+  o = CarmenOptions{};
+  o.timestamp = "gps";
+  EXPECT_FALSE(o.Validate().ok());
+  EXPECT_THROW(ConvertCarmen(o, "in.log", "out.lcmlog"), std::invalid_argument);
+  // YAML round trip of the defaults, and an unknown key is rejected.
+  const CarmenOptions back = LoadYamlString<CarmenOptions>(SaveYamlString(CarmenOptions{}));
+  EXPECT_EQ(back.noise.a3, CarmenOptions{}.noise.a3);
+  EXPECT_THROW(LoadYamlString<CarmenOptions>("noise: {a5: 1}"), ConfigError);
+}
+
+}  // namespace
+}  // namespace fl::importers
