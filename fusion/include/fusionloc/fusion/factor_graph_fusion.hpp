@@ -1,0 +1,303 @@
+// FactorGraphFusion: the MSIF fusion back-end (section 3). Laser-rate robot poses are the
+// graph's nodes; laser between-factors from the RBPF-SLAM (eqs. 13-15), vision between-
+// factors between stereo keyframes (eqs. 17-19), wheel odometry and a prior on the first pose
+// are its factors; each costs d(e) = e^T Omega e (eqs. 11-12), optionally through a robust
+// loss. Pure library: no LCM (the process fl-fusion adapts messages to these verbs).
+//
+// STATE: SE(2). A ground robot's laser, its RBPF map and its wheel odometry are planar, so
+// every node is T_map_base = (x, y, theta) with a Pose2Manifold (wrapped angle). The SE(3)-
+// with-planar-prior alternative would add three weakly observed dimensions per node (z,
+// roll, pitch) that only the vision factors see, for no gain in the planar pose that the
+// robot and the laser map need, and at twice the solve cost.
+//
+// VISION FACTORS IN SE(2): a relative_pose_factor_t is already expressed between robot BASE
+// frames (the VO applies the camera-to-base extrinsic T_base_camera: T_bi_bj =
+// T_b_c T_ci_cj T_c_b, with the information transformed by the adjoint). Its 6-DoF
+// measurement is projected to (x, y, yaw of the rotated x axis) and its 6x6 information
+// Omega is reduced by MARGINALISATION, not by cutting rows: Sigma = Omega^-1, keep the
+// (x, y, yaw) block of Sigma (rows/cols 0, 1, 5), invert. Cutting the information rows
+// instead would ignore the correlation with z/roll/pitch and be over-confident. Planar
+// producers (laser) fill only rows/cols 0, 1, 5 (the rest zero): that 3x3 block is used
+// directly.
+//
+// ASYNCHRONOUS SENSORS / TIME ATTACHMENT: nodes exist at laser times (10 Hz); a factor's
+// times utime_i, utime_j (e.g. 2 Hz vision keyframes) are attached to the NEAREST node if it
+// is within attach_tolerance_s; the small time offset between the factor time t and its node
+// time n is then corrected by INTERPOLATING the RBPF poses of the two nodes around t:
+//     T_n_t = T_rbpf(n)^-1 * Interp(T_rbpf(a), T_rbpf(b), (t - a) / (b - a))
+//     measurement used:  T_ni_nj = T_ni_ti * T_ti_tj * T_tj_nj
+// (the information is kept: the correction spans < one laser period). A factor whose time
+// lies beyond the newest node waits (pending) until the laser node for that time exists, so
+// factors that arrive early, late or out of order are placed by their timestamps alone. A
+// factor whose time has no node within the tolerance (before the first node, in a laser
+// gap) is rejected with a counted warning, as is any factor with NaNs, a non-symmetric,
+// singular or indefinite information, or both times on the same node. A rejected input never
+// changes the graph.
+//
+// WHEEL ODOMETRY: integrated poses T_odom_base; for each pair of consecutive nodes the
+// odometry pose is interpolated at both node times and the relative motion becomes a
+// between-factor with a motion-proportional noise model (options odom_*). Odometry later than
+// the nodes is applied as soon as it covers them.
+//
+// INCREMENTAL OPTIMISATION (section 3.2): Update() optimises only the newest window_size
+// nodes, holding the nodes just before the window constant (they fix the gauge); if new
+// factors reach further back (a late factor), the window is extended down to the oldest
+// affected node, up to max_window_nodes. A loop closure, a late factor beyond that reach, or
+// every full_solve_every_n_nodes nodes, requests a full solve of the whole graph. FullSolve()
+// runs it synchronously; for a non-blocking solve, PrepareFullSolve() copies the graph into
+// a FullSolveJob whose Run() needs no access to this object (run it on another thread while
+// this object keeps taking nodes and running Update()), then ApplyFullSolve() merges the
+// result: nodes solved by the job take its values, nodes added meanwhile are moved rigidly
+// with the newest solved node. Gauge: a prior on the first node (prior_sigma_*).
+//
+// Thread safety: one thread uses the object; only FullSolveJob::Run() may run elsewhere.
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/status.hpp"
+#include "fusionloc/common/time.hpp"
+
+namespace fl::fusion {
+
+enum class FactorSource : int8_t { kLaser = 0, kVision = 1, kWheelOdometry = 2 };
+const char* FactorSourceName(FactorSource source);
+
+// Mirrors fusionloc::relative_pose_factor_t: the pose of base frame j in base frame i.
+struct RelativePoseFactor {
+  Utime utime_i = 0;
+  Utime utime_j = 0;
+  Eigen::Isometry3d T_i_j = Eigen::Isometry3d::Identity();
+  // Information of [dx dy dz droll dpitch dyaw]; planar producers fill rows/cols 0, 1, 5.
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+  FactorSource source = FactorSource::kLaser;
+  bool is_loop_closure = false;
+  EIGEN_MAKE_ALIGNED_OPERATOR_NEW
+};
+
+struct FusionOptions {
+  double attach_tolerance_s = 0.06;   // [s] factor time to nearest laser node (10 Hz: 0.05)
+  int window_size = 20;               // [nodes] optimised by each Update()
+  int max_window_nodes = 200;         // [nodes] largest window a late factor may extend to;
+                                      // reaching further back requests a full solve
+  int window_max_iterations = 10;     // LM iterations of an incremental update
+  int full_max_iterations = 50;       // LM iterations of a full solve
+  int full_solve_every_n_nodes = 100; // [nodes] periodic full solve (0: never)
+  bool full_solve_on_loop_closure = true;  // a loop-closure factor requests a full solve
+  std::string robust_loss = "cauchy"; // laser/vision factors: "none", "huber" or "cauchy"
+  double robust_loss_scale = 3.0;     // [sigma] whitened error where the loss bends
+  double prior_sigma_xy = 0.001;      // [m] prior on the first node (gauge)
+  double prior_sigma_theta = 0.001;   // [rad]
+  bool use_wheel_odometry = true;     // add odometry between-factors
+  double odom_sigma_xy_min = 0.02;    // [m] odometry noise floor per node pair
+  double odom_sigma_xy_per_m = 0.05;  // [m/m] odometry xy noise per metre travelled
+  double odom_sigma_theta_min = 0.005;     // [rad] heading noise floor per node pair
+  double odom_sigma_theta_per_rad = 0.05;  // [rad/rad] heading noise per radian turned
+  double odom_sigma_theta_per_m = 0.01;    // [rad/m] heading noise per metre travelled
+  double odom_max_gap_s = 0.5;        // [s] no odometry factor across a larger sample gap
+  int max_pending_factors = 1000;     // factors waiting for their laser node; oldest dropped
+  bool compute_covariance = true;     // marginal covariance of the newest node per Update()
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("attach_tolerance_s", &attach_tolerance_s);
+    a->Visit("window_size", &window_size);
+    a->Visit("max_window_nodes", &max_window_nodes);
+    a->Visit("window_max_iterations", &window_max_iterations);
+    a->Visit("full_max_iterations", &full_max_iterations);
+    a->Visit("full_solve_every_n_nodes", &full_solve_every_n_nodes);
+    a->Visit("full_solve_on_loop_closure", &full_solve_on_loop_closure);
+    a->Visit("robust_loss", &robust_loss);
+    a->Visit("robust_loss_scale", &robust_loss_scale);
+    a->Visit("prior_sigma_xy", &prior_sigma_xy);
+    a->Visit("prior_sigma_theta", &prior_sigma_theta);
+    a->Visit("use_wheel_odometry", &use_wheel_odometry);
+    a->Visit("odom_sigma_xy_min", &odom_sigma_xy_min);
+    a->Visit("odom_sigma_xy_per_m", &odom_sigma_xy_per_m);
+    a->Visit("odom_sigma_theta_min", &odom_sigma_theta_min);
+    a->Visit("odom_sigma_theta_per_rad", &odom_sigma_theta_per_rad);
+    a->Visit("odom_sigma_theta_per_m", &odom_sigma_theta_per_m);
+    a->Visit("odom_max_gap_s", &odom_max_gap_s);
+    a->Visit("max_pending_factors", &max_pending_factors);
+    a->Visit("compute_covariance", &compute_covariance);
+  }
+  Status Validate() const;
+};
+
+// What one optimisation did (Ceres-style summary for the status message).
+struct SolveSummary {
+  bool ran = false;            // false: nothing to optimise
+  bool full = false;           // full solve (true) or incremental window (false)
+  std::string termination;     // Ceres termination type, e.g. "CONVERGENCE"
+  int iterations = 0;
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  double time_ms = 0.0;        // wall time of building + solving
+  int num_nodes = 0;           // nodes optimised
+  int num_factors = 0;         // factors in the problem
+  std::string ToString() const;
+};
+
+// Counters of everything rejected or dropped (all also warned, rate-limited).
+struct FusionCounters {
+  int64_t nodes = 0;
+  int64_t factors_added = 0;
+  int64_t rejected_node_time = 0;        // laser pose not newer than the previous one
+  int64_t rejected_non_finite = 0;       // NaN/Inf in a pose or factor
+  int64_t rejected_information = 0;      // non-symmetric / singular / indefinite information
+  int64_t rejected_no_node = 0;          // a factor time matches no node
+  int64_t rejected_same_node = 0;        // both factor times on one node
+  int64_t dropped_pending_overflow = 0;  // pending factors dropped (max_pending_factors)
+  int64_t rejected_odometry = 0;         // odometry sample out of order / non-finite
+  int64_t odometry_gaps = 0;             // node pairs without odometry coverage
+  int64_t full_solves = 0;
+  int64_t updates = 0;
+  int64_t rejected_total() const {
+    return rejected_node_time + rejected_non_finite + rejected_information + rejected_no_node +
+           rejected_same_node + dropped_pending_overflow + rejected_odometry;
+  }
+};
+
+struct TrajectoryPoint {
+  Utime utime = 0;
+  Pose2 T_map_base;
+};
+
+class FactorGraphFusion;
+
+// A copy of the whole graph, optimised without touching the FactorGraphFusion it came from.
+class FullSolveJob {
+ public:
+  // Runs the full solve (thread-safe with respect to the originating FactorGraphFusion).
+  void Run();
+  const SolveSummary& summary() const { return summary_; }
+
+ private:
+  friend class FactorGraphFusion;
+  struct JobFactor {
+    int i = -1, j = -1;  // j = -1: unary (prior)
+    std::shared_ptr<ceres::CostFunction> cost;
+    std::shared_ptr<ceres::LossFunction> loss;
+  };
+  std::vector<Eigen::Vector3d> states_;
+  std::vector<JobFactor> factors_;
+  int max_iterations_ = 50;
+  int num_factors_at_snapshot_ = 0;
+  SolveSummary summary_;
+};
+
+class FactorGraphFusion {
+ public:
+  explicit FactorGraphFusion(const FusionOptions& options);
+  ~FactorGraphFusion();
+
+  // A laser-rate pose from the RBPF-SLAM (T_map_base at utime): creates a node. Times must
+  // increase; the pose initialises the node (relative to the previous fused node) and
+  // interpolates factor times. Returns an error (counted, graph unchanged) if rejected.
+  Status AddLaserPose(Utime utime, const Pose2& T_map_base);
+  // A relative-pose factor; attached to nodes by its times (see the file comment). OK also
+  // when the factor waits for its laser node (pending).
+  Status AddFactor(const RelativePoseFactor& factor);
+  // An integrated wheel-odometry pose T_odom_base at utime (times must increase).
+  Status AddOdometry(Utime utime, const Pose2& T_odom_base);
+
+  // Incremental update of the window; cheap. Returns what it did.
+  SolveSummary Update();
+  // Full solve of the whole graph, synchronously.
+  SolveSummary FullSolve();
+  // True if a loop closure, a far-reaching late factor or the period asks for a full solve.
+  bool full_solve_requested() const { return full_solve_requested_; }
+  // Non-blocking full solve: snapshot -> job.Run() elsewhere -> ApplyFullSolve(job).
+  std::unique_ptr<FullSolveJob> PrepareFullSolve();
+  void ApplyFullSolve(const FullSolveJob& job);
+
+  // Fused estimate of the newest node (false if there is no node yet).
+  bool Latest(TrajectoryPoint* out) const;
+  // Covariance of (x, y, theta) of the newest node from the last Update() (window-relative:
+  // the nodes before the window are treated as known). Zero if unavailable.
+  const Eigen::Matrix3d& latest_covariance() const { return latest_covariance_; }
+  // Fused pose at any time inside the trajectory, interpolated between nodes.
+  bool PoseAt(Utime utime, Pose2* T_map_base) const;
+  std::vector<TrajectoryPoint> Trajectory() const;
+
+  int num_nodes() const { return static_cast<int>(nodes_.size()); }
+  int num_factors() const { return static_cast<int>(factors_.size()); }
+  int num_pending_factors() const { return static_cast<int>(pending_.size()); }
+  const FusionCounters& counters() const { return counters_; }
+  const SolveSummary& last_summary() const { return last_summary_; }
+  const FusionOptions& options() const { return options_; }
+
+ private:
+  struct Node {
+    Utime utime = 0;
+    Pose2 T_map_base_rbpf;                 // input pose (for initialisation/interpolation)
+    Eigen::Vector3d state = Eigen::Vector3d::Zero();  // fused T_map_base (x, y, theta)
+    std::vector<int> factors;              // indices into factors_
+  };
+  struct Factor {
+    int i = -1, j = -1;  // node indices; j = -1 for the prior
+    Pose2 T_i_j;
+    Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
+    FactorSource source = FactorSource::kLaser;
+    bool is_loop_closure = false;
+    bool is_prior = false;
+    std::shared_ptr<ceres::CostFunction> cost;
+    std::shared_ptr<ceres::LossFunction> loss;
+  };
+  struct PendingFactor {
+    RelativePoseFactor factor;
+    Pose2 T_i_j;
+    Eigen::Matrix3d information;
+    EIGEN_MAKE_ALIGNED_OPERATOR_NEW
+  };
+  struct OdomSample {
+    Utime utime;
+    Pose2 T_odom_base;
+  };
+
+  Status Reject(int64_t* counter, const std::string& message);
+  // Resolves a time to a node and the correction T_node_t; false if no node is near.
+  bool Attach(Utime t, int* node, Pose2* T_node_t) const;
+  Status AttachFactor(const RelativePoseFactor& f, const Pose2& T_i_j,
+                      const Eigen::Matrix3d& information);
+  void AddGraphFactor(Factor factor);
+  void AttachPendingFactors();
+  void AddOdometryFactors();
+  bool OdometryAt(Utime t, Pose2* T_odom_base) const;
+  SolveSummary SolveWindow(int first_node);
+
+  FusionOptions options_;
+  std::deque<Node> nodes_;
+  std::vector<Factor> factors_;
+  std::deque<PendingFactor> pending_;
+  std::deque<OdomSample> odometry_;
+  int next_odom_pair_ = 1;             // next node j needing an odometry factor (j-1, j)
+  int oldest_touched_node_ = -1;       // oldest node touched by factors since last Update
+  bool full_solve_requested_ = false;
+  int nodes_at_last_full_solve_ = 0;
+  Eigen::Matrix3d latest_covariance_ = Eigen::Matrix3d::Zero();
+  SolveSummary last_summary_;
+  FusionCounters counters_;
+  std::unique_ptr<ceres::Manifold> manifold_;
+  std::shared_ptr<ceres::LossFunction> robust_loss_;
+  struct Warnings;
+  std::unique_ptr<Warnings> warnings_;
+};
+
+// Reduces a 6x6 information of [x y z roll pitch yaw] to (x, y, yaw) by marginalisation (see
+// the file comment). False (with a reason) if it is not finite, not symmetric, singular or
+// indefinite.
+bool ReduceInformationToPlanar(const Eigen::Matrix<double, 6, 6>& information,
+                               Eigen::Matrix3d* planar, std::string* reason);
+
+}  // namespace fl::fusion

@@ -1,0 +1,162 @@
+#include "fusionloc/fusion/cost_functions.hpp"
+
+#include <ceres/gradient_checker.h>
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace fl::fusion {
+namespace {
+
+// Ridders' extrapolation from a smaller first step than the default 1e-2 (relative): with
+// parameters of magnitude ~3 the default first step spans a large part of a sine period.
+ceres::NumericDiffOptions CheckerOptions() {
+  ceres::NumericDiffOptions nd;
+  nd.ridders_relative_initial_step_size = 1e-4;
+  return nd;
+}
+
+Eigen::Matrix3d RandomSpd3(std::mt19937* rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::Matrix3d a;
+  for (int i = 0; i < 9; ++i) a.data()[i] = n(*rng);
+  return a * a.transpose() + Eigen::Matrix3d::Identity();
+}
+
+TEST(FusionCostFunctions, SqrtInformationExactGivesOmega) {
+  std::mt19937 rng(1);
+  const Eigen::Matrix3d omega = RandomSpd3(&rng);
+  Eigen::Matrix3d s;
+  ASSERT_TRUE(SqrtInformation<3>(omega, &s));
+  EXPECT_LT((s.transpose() * s - omega).norm(), 1e-9);
+  // Ceres-example convention S = L: S S^T = Omega.
+  ASSERT_TRUE(SqrtInformation<3>(omega, &s, SqrtConvention::kCeresExample));
+  EXPECT_LT((s * s.transpose() - omega).norm(), 1e-9);
+}
+
+TEST(FusionCostFunctions, SqrtInformationRejectsBadMatrices) {
+  Eigen::Matrix3d s;
+  Eigen::Matrix3d m = Eigen::Matrix3d::Identity();
+  m(0, 1) = 0.5;  // not symmetric
+  EXPECT_FALSE(SqrtInformation<3>(m, &s));
+  m = Eigen::Matrix3d::Identity();
+  m(2, 2) = 0.0;  // singular
+  EXPECT_FALSE(SqrtInformation<3>(m, &s));
+  m(2, 2) = -1.0;  // indefinite
+  EXPECT_FALSE(SqrtInformation<3>(m, &s));
+  m(2, 2) = std::nan("");
+  EXPECT_FALSE(SqrtInformation<3>(m, &s));
+  EXPECT_FALSE(SqrtInformation<3>(Eigen::Matrix3d::Zero(), &s));
+}
+
+TEST(FusionCostFunctions, Se2BetweenGradientChecker) {
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> u(-3.0, 3.0);
+  Pose2Manifold manifold;
+  const std::vector<const ceres::Manifold*> manifolds = {&manifold, &manifold};
+  for (int trial = 0; trial < 20; ++trial) {
+    const Eigen::Vector3d meas(u(rng), u(rng), u(rng));
+    Eigen::Matrix3d s;
+    ASSERT_TRUE(SqrtInformation<3>(RandomSpd3(&rng), &s));
+    std::unique_ptr<ceres::CostFunction> cost(Se2BetweenCost::Create(meas, s));
+    ceres::GradientChecker checker(cost.get(), &manifolds, CheckerOptions());
+    double pi[3] = {u(rng), u(rng), u(rng)};
+    double pj[3] = {u(rng), u(rng), u(rng)};
+    const double* params[2] = {pi, pj};
+    ceres::GradientChecker::ProbeResults results;
+    EXPECT_TRUE(checker.Probe(params, 1e-7, &results)) << results.error_log;
+  }
+}
+
+TEST(FusionCostFunctions, Se2BetweenZeroAtTruthAndWrapsAngle) {
+  // Node i faces almost -x (heading pi - 0.01); node j is 1 m ahead and 0.02 rad further
+  // left, i.e. across the +-pi cut. The residual must be zero, not 2 pi.
+  const double ti = M_PI - 0.01;
+  const double pi[3] = {1.0, 2.0, ti};
+  const double pj[3] = {1.0 + std::cos(ti), 2.0 + std::sin(ti), ti + 0.02 - 2.0 * M_PI};
+  std::unique_ptr<ceres::CostFunction> cost(
+      Se2BetweenCost::Create(Eigen::Vector3d(1.0, 0.0, 0.02), Eigen::Matrix3d::Identity()));
+  const double* params[2] = {pi, pj};
+  double r[3];
+  ASSERT_TRUE(cost->Evaluate(params, r, nullptr));
+  for (double v : r) EXPECT_NEAR(v, 0.0, 1e-12);
+  // A wrong measurement gives the expected whitened residual.
+  std::unique_ptr<ceres::CostFunction> off(Se2BetweenCost::Create(
+      Eigen::Vector3d(1.0, 0.0, 0.02), 2.0 * Eigen::Matrix3d::Identity()));
+  const double pj2[3] = {pj[0], pj[1], pj[2] + 0.1};
+  const double* params2[2] = {pi, pj2};
+  ASSERT_TRUE(off->Evaluate(params2, r, nullptr));
+  EXPECT_NEAR(r[2], 0.2, 1e-12);
+}
+
+TEST(FusionCostFunctions, Se2PriorGradientChecker) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-3.0, 3.0);
+  Pose2Manifold manifold;
+  const std::vector<const ceres::Manifold*> manifolds = {&manifold};
+  for (int trial = 0; trial < 10; ++trial) {
+    Eigen::Matrix3d s;
+    ASSERT_TRUE(SqrtInformation<3>(RandomSpd3(&rng), &s));
+    std::unique_ptr<ceres::CostFunction> cost(
+        Se2PriorCost::Create(Eigen::Vector3d(u(rng), u(rng), u(rng)), s));
+    ceres::GradientChecker checker(cost.get(), &manifolds, CheckerOptions());
+    double p[3] = {u(rng), u(rng), u(rng)};
+    const double* params[1] = {p};
+    ceres::GradientChecker::ProbeResults results;
+    EXPECT_TRUE(checker.Probe(params, 1e-7, &results)) << results.error_log;
+  }
+}
+
+TEST(FusionCostFunctions, Se3BetweenGradientChecker) {
+  std::mt19937 rng(4);
+  std::normal_distribution<double> n(0.0, 1.0);
+  ceres::EigenQuaternionManifold quat;
+  const std::vector<const ceres::Manifold*> manifolds = {nullptr, &quat, nullptr, &quat};
+  for (int trial = 0; trial < 10; ++trial) {
+    Eigen::Matrix<double, 6, 6> a;
+    for (int i = 0; i < 36; ++i) a.data()[i] = n(rng);
+    Eigen::Matrix<double, 6, 6> s;
+    ASSERT_TRUE(SqrtInformation<6>(a * a.transpose() + Eigen::Matrix<double, 6, 6>::Identity(),
+                                   &s));
+    const Eigen::Quaterniond q_ij = Eigen::Quaterniond(n(rng), n(rng), n(rng), n(rng)).normalized();
+    std::unique_ptr<ceres::CostFunction> cost(
+        Se3BetweenCost::Create(Eigen::Vector3d(n(rng), n(rng), n(rng)), q_ij, s));
+    ceres::GradientChecker checker(cost.get(), &manifolds, CheckerOptions());
+    Eigen::Vector3d p_i(n(rng), n(rng), n(rng)), p_j(n(rng), n(rng), n(rng));
+    Eigen::Quaterniond q_i = Eigen::Quaterniond(n(rng), n(rng), n(rng), n(rng)).normalized();
+    Eigen::Quaterniond q_j = Eigen::Quaterniond(n(rng), n(rng), n(rng), n(rng)).normalized();
+    const double* params[4] = {p_i.data(), q_i.coeffs().data(), p_j.data(), q_j.coeffs().data()};
+    ceres::GradientChecker::ProbeResults results;
+    EXPECT_TRUE(checker.Probe(params, 1e-7, &results)) << results.error_log;
+  }
+}
+
+TEST(FusionCostFunctions, Se3BetweenZeroAtTruth) {
+  const Eigen::Quaterniond q_i(Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()));
+  const Eigen::Quaterniond q_ij(Eigen::AngleAxisd(-0.7, Eigen::Vector3d(0, 1, 1).normalized()));
+  const Eigen::Vector3d p_i(1, 2, 3), p_ij(0.5, -0.2, 0.1);
+  const Eigen::Vector3d p_j = p_i + q_i * p_ij;
+  const Eigen::Quaterniond q_j = q_i * q_ij;
+  std::unique_ptr<ceres::CostFunction> cost(
+      Se3BetweenCost::Create(p_ij, q_ij, Eigen::Matrix<double, 6, 6>::Identity()));
+  const double* params[4] = {p_i.data(), q_i.coeffs().data(), p_j.data(), q_j.coeffs().data()};
+  double r[6];
+  ASSERT_TRUE(cost->Evaluate(params, r, nullptr));
+  for (double v : r) EXPECT_NEAR(v, 0.0, 1e-12);
+}
+
+TEST(FusionCostFunctions, Pose2ManifoldWrapsAngle) {
+  Pose2Manifold m;
+  const double x[3] = {1.0, 2.0, M_PI - 0.1};
+  const double d[3] = {0.5, -0.5, 0.3};
+  double y[3];
+  ASSERT_TRUE(m.Plus(x, d, y));
+  EXPECT_DOUBLE_EQ(y[0], 1.5);
+  EXPECT_NEAR(y[2], -M_PI + 0.2, 1e-12);
+  double back[3];
+  ASSERT_TRUE(m.Minus(y, x, back));
+  EXPECT_NEAR(back[2], 0.3, 1e-12);
+}
+
+}  // namespace
+}  // namespace fl::fusion
