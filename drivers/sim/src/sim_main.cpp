@@ -133,7 +133,7 @@ int main(int argc, char** argv) {
       options = fl::sim::DefaultOptionsForWorld(world);
     }
     if (seed != -1) options.seed = seed;
-    if (duration >= 0.0) options.duration_s = duration;
+    if (duration != -1.0) options.duration_s = duration;
     if (rate < 0.0) {
       std::fprintf(stderr, "fl-sim: --rate %g is negative; use 1 for real time or 0 for as fast "
                            "as possible\n", rate);

@@ -53,7 +53,7 @@ Status WorldOptions::Validate() const {
   if (name != "paper" && name != "corridor") {
     c.Fail("name = '" + name + "' is not a known world; use 'paper' or 'corridor'");
   }
-  c.Range("landmarks", landmarks, 0, 200);
+  c.Range("landmarks", landmarks, 0, 1000);
   c.Range("route_clearance_m", route_clearance_m, 0.8, 5.0, " m (the robot must keep 0.5 m)");
   c.Range("wall_height_m", wall_height_m, 1.0, 10.0, " m");
   c.Range("corridor_length_m", corridor_length_m, 40.0, 200.0, " m");

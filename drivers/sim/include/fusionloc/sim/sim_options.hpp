@@ -14,7 +14,7 @@ namespace fl::sim {
 // Which world to build and how to populate it.
 struct WorldOptions {
   std::string name = "paper";     // "paper" (30 m x 30 m, random landmarks) or "corridor"
-  int landmarks = 30;             // [count] paper: random pillars and boxes (0..200)
+  int landmarks = 30;             // [count] paper: random pillars and boxes (0..1000)
   double route_clearance_m = 1.5; // [m] paper: min distance from a landmark to the route line
   double wall_height_m = 2.5;     // [m] height of walls (corridor: also the ceiling height)
   double corridor_length_m = 60.0;  // [m] corridor: length of the main corridor (>= 40)

@@ -1,0 +1,65 @@
+// fl-sim program: help, errors, and writing a log.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "fusionloc/common/lcm_interface.hpp"
+#include "test_paths.hpp"
+
+namespace {
+
+// Runs a shell command, returns its exit status and combined output.
+int RunCommand(const std::string& command, std::string* output) {
+  output->clear();
+  FILE* p = popen((command + " 2>&1").c_str(), "r");
+  if (p == nullptr) return -1;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) output->append(buf, n);
+  const int status = pclose(p);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+const std::string kSim = fl::test::BinDir() + "/fl-sim";
+
+TEST(SimMainTest, HelpListsFlagsAndChannels) {
+  std::string out;
+  EXPECT_EQ(RunCommand(kSim + " --help", &out), 0);
+  for (const char* s : {"--world", "--seed", "--duration", "--log", "--lcm-url", "--rate",
+                        "--config", "LASER", "STEREO_CALIBRATION", "GROUND_TRUTH"}) {
+    EXPECT_NE(out.find(s), std::string::npos) << s << " missing from:\n" << out;
+  }
+}
+
+TEST(SimMainTest, BadInputGivesClearErrors) {
+  std::string out;
+  EXPECT_EQ(RunCommand(kSim + " --world office --log /dev/null", &out), 1);
+  EXPECT_NE(out.find("'paper' or 'corridor'"), std::string::npos) << out;
+  EXPECT_EQ(RunCommand(kSim + " --duration -3 --seed -7 --log x", &out), 2);
+  EXPECT_NE(out.find("seed"), std::string::npos) << out;
+  EXPECT_EQ(RunCommand(kSim + " --config /nonexistent/sim.yaml", &out), 1);
+  EXPECT_NE(out.find("/nonexistent/sim.yaml"), std::string::npos) << out;
+  EXPECT_EQ(RunCommand(kSim + " --rate -1", &out), 2);
+  EXPECT_NE(out.find("--rate"), std::string::npos) << out;
+}
+
+TEST(SimMainTest, WritesALogFromAConfigFile) {
+  fl::test::TempDir dir;
+  std::string out;
+  const std::string log = dir.file("sim.lcmlog");
+  ASSERT_EQ(RunCommand(kSim + " --config " + fl::test::SourceDir() +
+                    "/config/sim_corridor.yaml --duration 0.5 --log " + log,
+                &out),
+            0)
+      << out;
+  fl::LcmLogReader reader(log);
+  fl::LcmLogEvent ev;
+  int events = 0, stereo = 0;
+  while (reader.Next(&ev)) ++events, stereo += ev.channel == "STEREO";
+  EXPECT_EQ(events, 6 * 3 + 1 + 2);  // 6 steps x (truth, odometry, laser) + calib + 2 pairs
+  EXPECT_EQ(stereo, 2);
+}
+
+}  // namespace
