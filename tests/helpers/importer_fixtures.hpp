@@ -101,6 +101,10 @@ struct KittiRawFixture {
   double fx = 100.0;
   double right_fx = 100.0;  // set != fx to make the calibration inconsistent
   bool write_poses = true;
+  // OXTS records (oxts/data/*.txt) in which the vehicle drives 1 m east per frame at latitude
+  // 49 deg, heading east, plus calib_imu_to_velo.txt (identity) and calib_velo_to_cam.txt
+  // (velo x forward -> camera z forward), so the base moves +1 m along x per frame.
+  bool write_oxts = false;
 
   void Write(const std::string& root) const {
     namespace fs = std::filesystem;
@@ -135,7 +139,24 @@ struct KittiRawFixture {
     calib << "S_rect_01: " << width << " " << height << "\n";
     calib << "P_rect_01: " << right_fx << " 0 " << width / 2.0 << " " << -0.5 * right_fx
           << " 0 " << right_fx << " " << height / 2.0 << " 0 0 0 1 0\n";
+    calib << "R_rect_00: 1 0 0 0 1 0 0 0 1\n";
     WriteText(root + "/calib_cam_to_cam.txt", calib.str());
+    if (write_oxts) {
+      fs::create_directories(root + "/oxts/data");
+      const double lat = 49.0, lon0 = 8.4;
+      const double metre_in_deg = 180.0 / (M_PI * 6378137.0 * std::cos(lat * M_PI / 180.0));
+      for (int i = 0; i < frames; ++i) {
+        char name[32];
+        std::snprintf(name, sizeof(name), "%010d.txt", i);
+        std::ostringstream rec;
+        rec.precision(17);
+        rec << lat << " " << lon0 + i * metre_in_deg << " 116.0 0 0 0";
+        for (int k = 6; k < 30; ++k) rec << " 0";
+        WriteText(root + "/oxts/data/" + name, rec.str() + "\n");
+      }
+      WriteText(root + "/calib_imu_to_velo.txt", "R: 1 0 0 0 1 0 0 0 1\nT: 0 0 0\n");
+      WriteText(root + "/calib_velo_to_cam.txt", "R: 0 -1 0 0 0 -1 1 0 0\nT: 0 0 0\n");
+    }
   }
 };
 

@@ -174,6 +174,46 @@ TEST(KittiTest, OdometryLayoutColourToGrayAndEpoch) {
   EXPECT_NEAR(cal.T_base_camera.trans[1], 0.1, 1e-12);
 }
 
+TEST(KittiTest, OxtsPosesReproduceThePoseFile) {
+  const std::string folder = fl::test::SharedDataDir() + "/stereo/kitti_raw_2011_09_26_drive_0001";
+  FL_REQUIRE_SHARED_FILE(folder + "/poses_cam0_from_oxts.txt");
+  FL_REQUIRE_SHARED_FILE(folder + "/oxts/data");
+  const std::vector<Eigen::Isometry3d> oxts = PosesFromOxts(folder);
+  KittiOptions opts;
+  const KittiSequence seq = ScanKittiFolder(opts, folder);
+  ASSERT_EQ(oxts.size(), seq.T_cam0start_cam0.size());
+  ASSERT_EQ(oxts.size(), 108u);
+  for (size_t i = 0; i < oxts.size(); ++i) {
+    EXPECT_LT((oxts[i].translation() - seq.T_cam0start_cam0[i].translation()).norm(), 1e-5) << i;
+    const Eigen::Matrix3d dR = oxts[i].linear().transpose() * seq.T_cam0start_cam0[i].linear();
+    EXPECT_LT(Eigen::AngleAxisd(dR).angle(), 1e-6)
+        << i;
+  }
+}
+
+TEST(KittiTest, GroundTruthFromOxtsWhenNoPoseFile) {
+  TempDir dir;
+  fl::test::KittiRawFixture fx;
+  fx.write_poses = false;
+  fx.write_oxts = true;
+  fx.Write(dir.file("d"));
+  const ConvertSummary s = ConvertKitti(KittiOptions{}, dir.file("d"), dir.file("o.lcmlog"));
+  ASSERT_EQ(s.messages.at(channels::kGroundTruth), 3);
+  ASSERT_EQ(s.warnings.size(), 1u);
+  EXPECT_NE(s.warnings[0].find("computed from"), std::string::npos);
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  for (size_t i = 0; i < 3; ++i) {
+    const auto gt = log.Decode<bot_core::pose_t>(channels::kGroundTruth, i);
+    EXPECT_NEAR(gt.pos[0], static_cast<double>(i), 1e-6);  // 1 m east = 1 m forward
+    EXPECT_NEAR(gt.pos[1], 0.0, 1e-6);
+    EXPECT_NEAR(gt.pos[2], 0.0, 1e-6);
+  }
+  // A record with too few fields is an error naming the file and line.
+  fl::test::WriteText(dir.file("d/oxts/data/0000000001.txt"), "49.0 8.4 116.0\n");
+  const std::string msg = ExpectConvertError(KittiOptions{}, dir.file("d"), dir.file("p.lcmlog"));
+  EXPECT_NE(msg.find("oxts/data/0000000001.txt:1: OXTS record"), std::string::npos) << msg;
+}
+
 // ---- bad input ----
 
 TEST(KittiBadInputTest, MissingImage) {

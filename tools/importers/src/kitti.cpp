@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <Eigen/SVD>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <set>
@@ -172,6 +173,17 @@ KittiCalibration CheckStereo(const Projection& l, const Projection& r, const std
   return c;
 }
 
+// The nearest rotation to a printed 3x3 matrix (6 to 10 significant digits, so R^T R is
+// only nearly I); an error naming `what` if it is not nearly a rotation at all.
+Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m, const std::string& what) {
+  if ((m.transpose() * m - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 ||
+      m.determinant() < 0.0) {
+    Fail(what + ": the 3x3 part is not a rotation (R^T R != I or det < 0)");
+  }
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  return svd.matrixU() * svd.matrixV().transpose();
+}
+
 std::vector<Eigen::Isometry3d> ReadPoses(const std::string& path) {
   std::vector<Eigen::Isometry3d> out;
   for (const auto& [n, line] : ReadLines(path)) {
@@ -181,19 +193,26 @@ std::vector<Eigen::Isometry3d> ReadPoses(const std::string& path) {
       for (int c = 0; c < 3; ++c) t.linear()(r, c) = v[static_cast<size_t>(4 * r + c)];
       t.translation()(r) = v[static_cast<size_t>(4 * r + 3)];
     }
-    const Eigen::Matrix3d rtr = t.linear().transpose() * t.linear();
-    if ((rtr - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 ||
-        t.linear().determinant() < 0.0) {
-      Fail(path + ":" + std::to_string(n) +
-           ": the 3x3 part is not a rotation (R^T R != I or det < 0)");
-    }
-    // Re-orthonormalise the printed rotation (6 to 10 significant digits).
-    const Eigen::Quaterniond q(t.linear());
-    t.linear() = q.normalized().toRotationMatrix();
+    t.linear() = NearestRotation(t.linear(), path + ":" + std::to_string(n));
     out.push_back(t);
   }
   if (out.empty()) Fail(path + ": pose file is empty");
   return out;
+}
+
+// "R: 9 numbers" + "T: 3 numbers" calibration file -> T_to_from.
+Eigen::Isometry3d ReadRigidCalib(const std::string& path) {
+  if (!IsFile(path)) Fail(path + ": missing (needed to convert OXTS to camera poses)");
+  const auto calib = ReadCalibFile(path);
+  const auto r = CalibValue(calib, path, "R", 9);
+  const auto t = CalibValue(calib, path, "T", 3);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) T.linear()(i, j) = r[static_cast<size_t>(3 * i + j)];
+    T.translation()(i) = t[static_cast<size_t>(i)];
+  }
+  T.linear() = NearestRotation(T.linear(), path + " (R)");
+  return T;
 }
 
 // Checks that right images pair up with left images by file name.
@@ -319,6 +338,56 @@ bool ParseKittiTimestamp(const std::string& text, Utime* utime) {
   return true;
 }
 
+std::vector<Eigen::Isometry3d> PosesFromOxts(const std::string& folder) {
+  const std::string dir = Join(folder, "oxts/data");
+  if (!IsDir(dir)) Fail(dir + ": folder missing (no OXTS records)");
+  std::vector<std::string> files;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->path().extension() == ".txt") files.push_back(it->path().string());
+  }
+  if (ec) Fail(dir + ": cannot list folder: " + ec.message());
+  std::sort(files.begin(), files.end());
+  if (files.empty()) Fail(dir + ": no .txt OXTS records (empty folder)");
+  const Eigen::Isometry3d T_velo_imu = ReadRigidCalib(Join(folder, "calib_imu_to_velo.txt"));
+  const Eigen::Isometry3d T_cam0_velo = ReadRigidCalib(Join(folder, "calib_velo_to_cam.txt"));
+  // The images are rectified: express the poses in the rectified cam0 frame (R_rect_00).
+  const std::string cpath = Join(folder, "calib_cam_to_cam.txt");
+  const auto rr = CalibValue(ReadCalibFile(cpath), cpath, "R_rect_00", 9);
+  Eigen::Isometry3d T_rect0_cam0 = Eigen::Isometry3d::Identity();
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) T_rect0_cam0.linear()(i, j) = rr[static_cast<size_t>(3 * i + j)];
+  }
+  T_rect0_cam0.linear() = NearestRotation(T_rect0_cam0.linear(), cpath + " (R_rect_00)");
+  const Eigen::Isometry3d T_cam0_imu = T_rect0_cam0 * T_cam0_velo * T_velo_imu;
+  constexpr double kEarthRadius = 6378137.0;  // [m] WGS84 equatorial radius, as the devkit
+  double scale = 0.0;
+  Eigen::Isometry3d T_imu0_world = Eigen::Isometry3d::Identity();
+  std::vector<Eigen::Isometry3d> out;
+  for (size_t i = 0; i < files.size(); ++i) {
+    const auto lines = ReadLines(files[i]);
+    if (lines.empty()) Fail(files[i] + ": empty OXTS record");
+    const auto v = ParseNumbers(lines[0].second, 30, files[i], lines[0].first,
+                                "OXTS record (lat lon alt roll pitch yaw ...)");
+    const double lat = v[0], lon = v[1], alt = v[2];
+    if (std::abs(lat) > 85.0 || std::abs(lon) > 180.0) {
+      Fail(files[i] + ":" + std::to_string(lines[0].first) + ": latitude " +
+           std::to_string(lat) + " / longitude " + std::to_string(lon) + " out of range");
+    }
+    if (i == 0) scale = std::cos(lat * M_PI / 180.0);
+    // Mercator projection with the first frame's scale (KITTI devkit convertOxtsToPose).
+    const Eigen::Vector3d t(scale * lon * M_PI * kEarthRadius / 180.0,
+                            scale * kEarthRadius * std::log(std::tan((90.0 + lat) * M_PI / 360.0)),
+                            alt);
+    Eigen::Isometry3d T_world_imu = Eigen::Isometry3d::Identity();
+    T_world_imu.linear() = RotationFromRollPitchYaw(v[3], v[4], v[5]);
+    T_world_imu.translation() = t;
+    if (i == 0) T_imu0_world = T_world_imu.inverse();
+    out.push_back(T_cam0_imu * (T_imu0_world * T_world_imu) * T_cam0_imu.inverse());
+  }
+  return out;
+}
+
 KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& folder) {
   const Status valid = options.Validate();
   if (!valid.ok()) throw std::invalid_argument("KITTI options: " + valid.message());
@@ -435,12 +504,17 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
            " (the pose file must have one line per frame; wrong sequence?)");
     }
     seq.poses_path = ppath;
+  } else if (raw && IsDir(Join(folder, "oxts"))) {
+    seq.T_cam0start_cam0 = PosesFromOxts(folder);
+    if (seq.T_cam0start_cam0.size() != frames) {
+      Fail(Join(folder, "oxts/data") + ": " + std::to_string(seq.T_cam0start_cam0.size()) +
+           " OXTS records for " + std::to_string(frames) +
+           " frames (one per frame needed; give --poses FILE instead)");
+    }
+    seq.poses_path = Join(folder, "oxts");
   } else if (!options.allow_no_ground_truth) {
-    Fail(folder + ": no ground truth: no poses_cam0_from_oxts.txt here" +
-         std::string(IsDir(Join(folder, "oxts")) ? " (oxts/ found, but converting OXTS is not "
-                                                   "supported)"
-                                                 : "") +
-         "; give --poses FILE (12 numbers a line, e.g. KITTI odometry poses/NN.txt) or "
+    Fail(folder + ": no ground truth: neither poses_cam0_from_oxts.txt nor oxts/ here; give "
+         "--poses FILE (12 numbers a line, e.g. KITTI odometry poses/NN.txt) or "
          "--no-ground-truth");
   }
   if (static_cast<size_t>(options.start_frame) >= frames) {
@@ -492,6 +566,9 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
   }
   if (seq.T_cam0start_cam0.empty()) {
     summary.warnings.push_back("no ground truth: GROUND_TRUTH not written");
+  } else if (fs::path(seq.poses_path).filename() == "oxts") {
+    summary.warnings.push_back("ground truth computed from " + seq.poses_path +
+                               " (KITTI devkit OXTS-to-pose method; no pose file given)");
   }
 
   LcmLogWriter writer(out_log);

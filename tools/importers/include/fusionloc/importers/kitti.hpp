@@ -10,6 +10,8 @@
 //                        start; utime = kKittiOdometryEpochUtime + seconds);
 //                        ground truth from --poses FILE (poses/NN.txt).
 // Pose files: one line per frame, 12 numbers = row-major 3x4 T_cam0start_cam0(frame).
+// A raw drive without a pose file but with oxts/ gets its ground truth from OXTS (see
+// PosesFromOxts).
 //
 // Output channels:
 //   STEREO_CALIBRATION  fusionloc.stereo_calibration_t, before the first frame and again every
@@ -39,7 +41,7 @@ struct KittiOptions {
   int start_frame = 0;    // [frames] first frame to convert (0 = the first)
   int max_frames = -1;    // [frames] at most this many frames (-1 = all)
   // Ground-truth pose file (12 numbers a line). "" = <folder>/poses_cam0_from_oxts.txt if it
-  // exists, else none.
+  // exists, else (raw drives) computed from <folder>/oxts/, else none.
   std::string poses_file;
   // With no pose file: false = error (with the fix), true = convert without GROUND_TRUTH.
   bool allow_no_ground_truth = false;
@@ -80,13 +82,22 @@ struct KittiSequence {
   std::vector<std::string> right_images;
   std::vector<Utime> utimes;               // [us] per frame (left camera)
   KittiCalibration calibration;
-  std::string poses_path;                  // "" if none
+  std::string poses_path;                  // pose file or oxts folder used; "" if none
   std::vector<Eigen::Isometry3d> T_cam0start_cam0;  // per frame, empty if no poses
 };
 
 // Scans and validates a folder (layout, image lists, time stamps, calibration, poses).
 // Throws std::runtime_error naming the file (and line) and the fix on any inconsistency.
 KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& folder);
+
+// Ground truth of a raw drive from its OXTS records, the way the KITTI devkit does it
+// (convertOxtsToPose: Mercator projection scaled by the first frame's latitude, orientation
+// Rz(yaw) Ry(pitch) Rx(roll), relative to the first frame), expressed as left-camera poses:
+// T_cam0(0)_cam0(i) = T_cam0_imu * T_imu(0)_imu(i) * T_cam0_imu^-1 with cam0 the rectified
+// left camera: T_cam0_imu = R_rect_00 (calib_cam_to_cam.txt) * T_velo_to_cam
+// (calib_velo_to_cam.txt) * T_imu_to_velo (calib_imu_to_velo.txt). One pose per
+// oxts/data/*.txt file. On the shared drive this reproduces poses_cam0_from_oxts.txt to 1e-6 m.
+std::vector<Eigen::Isometry3d> PosesFromOxts(const std::string& folder);
 
 // Parses "YYYY-MM-DD HH:MM:SS.fffffffff" (UTC) to microseconds since the epoch (rounded).
 // Returns false if the text is not in that form.
