@@ -42,7 +42,13 @@ Matched Match(const Trajectory& est, const Trajectory& ref, Utime max_dt_us) {
   return m;
 }
 
-double AngleDeg(const Eigen::Matrix3d& r) { return RotationAngle(r) * kRadToDeg; }
+// Rotation angle [rad] via the quaternion, 2 atan2(|v|, |w|): accurate near 0, where
+// acos((trace - 1) / 2) loses half the digits.
+double AngleRad(const Eigen::Matrix3d& r) {
+  const Eigen::Quaterniond q(r);
+  return 2.0 * std::atan2(q.vec().norm(), std::fabs(q.w()));
+}
+double AngleDeg(const Eigen::Matrix3d& r) { return AngleRad(r) * kRadToDeg; }
 
 // Nearest pose of `traj` to `t` within max_dt, or -1.
 long Nearest(const Trajectory& traj, Utime t, Utime max_dt_us) {
@@ -193,6 +199,7 @@ AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment ali
         AngleDeg(pr.T_world_base.linear().transpose() * aligned.T_world_base.linear()));
     r.err_x_m.push_back(d.x());
     r.err_y_m.push_back(d.y());
+    r.err_z_m.push_back(d.z());
     r.err_yaw_deg.push_back(WrapAngle(Yaw(aligned.T_world_base) - Yaw(pr.T_world_base)) *
                             kRadToDeg);
     r.est_aligned.push_back(aligned);
@@ -294,7 +301,7 @@ DriftResult ComputeKittiDrift(const Trajectory& est, const Trajectory& ref,
           m.est[first].T_world_base.inverse() * m.est[last].T_world_base;
       const Eigen::Isometry3d err = d_res.inverse() * d_gt;
       const double t_err = err.translation().norm() / len;       // [m/m]
-      const double r_err = RotationAngle(err.linear()) / len;    // [rad/m]
+      const double r_err = AngleRad(err.linear()) / len;         // [rad/m]
       t_sum[li] += t_err;
       r_sum[li] += r_err;
       ++count[li];

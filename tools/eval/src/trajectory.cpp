@@ -318,6 +318,10 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
     for (const auto& [name, count] : channel_counts) {
       list += (list.empty() ? "" : ", ") + name + " (" + std::to_string(count) + ")";
     }
+    if (channel.empty()) {
+      throw EvalError("'" + log_path + "' is an LCM log: name the pose channel to read; channels "
+                      "present: " + (list.empty() ? "none (empty log)" : list));
+    }
     throw EvalError("channel '" + channel + "' not found in LCM log '" + log_path +
                     "'; channels present: " + (list.empty() ? "none (empty log)" : list));
   }
@@ -364,12 +368,7 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
 
 Trajectory ReadTrajectory(const std::string& path, const std::string& channel,
                           const std::string& format, const std::string& kitti_times_path) {
-  if (IsLcmLog(path)) {
-    if (channel.empty()) {
-      throw EvalError("'" + path + "' is an LCM log: name the pose channel to read");
-    }
-    return ReadTrajectoryLcm(path, channel);
-  }
+  if (IsLcmLog(path)) return ReadTrajectoryLcm(path, channel);
   return ReadTrajectoryText(path, format, kitti_times_path);
 }
 
@@ -443,7 +442,7 @@ std::vector<std::pair<size_t, size_t>> Associate(const Trajectory& est, const Tr
     msg << std::fixed << std::setprecision(3) << "est covers t=[" << UtimeToSeconds(est.front().utime)
         << ", " << UtimeToSeconds(est.back().utime) << "] s, ref covers ["
         << UtimeToSeconds(ref.front().utime) << ", " << UtimeToSeconds(ref.back().utime)
-        << "] s; no pair within " << max_dt_us / 1000.0
+        << "] s; no pair within " << std::defaultfloat << max_dt_us / 1000.0
         << " ms: check the channels/files (same clock?) or --max-dt";
     throw EvalError(msg.str());
   }

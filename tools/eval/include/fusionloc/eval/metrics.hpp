@@ -36,7 +36,7 @@ struct AteResult {
   std::vector<fl::Utime> utimes;           // [us] est time stamps
   std::vector<double> trans_errors_m;      // |p_ref - p_aligned_est|
   std::vector<double> rot_errors_deg;      // angle of R_ref^-1 * R_aligned_est
-  std::vector<double> err_x_m, err_y_m;    // signed p_aligned_est - p_ref, world x and y
+  std::vector<double> err_x_m, err_y_m, err_z_m;  // signed p_aligned_est - p_ref, world x y z
   std::vector<double> err_yaw_deg;         // signed wrapped yaw(aligned est) - yaw(ref)
   Trajectory est_aligned;                  // aligned est poses (the associated ones)
   Trajectory ref_matched;                  // their ref poses

@@ -1,0 +1,99 @@
+// Runs the fl-eval program on small files: help, a good run, and bad inputs.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <fstream>
+
+#include "eval_fixtures.hpp"
+#include "fusionloc/eval/trajectory.hpp"
+#include "test_paths.hpp"
+
+namespace fl::eval {
+namespace {
+
+struct Result {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+Result RunEval(const std::string& args) {
+  const std::string cmd = fl::test::BinDir() + "/fl-eval " + args + " 2>&1";
+  Result r;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), pipe)) > 0) r.output.append(buf, n);
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class EvalMain : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ref_ = dir_.file("ref.tum");
+    est_ = dir_.file("est.tum");
+    Trajectory ref = fl::test::MakePlanarTrajectory(200, [](size_t i) {
+      const double s = 0.05 * static_cast<double>(i);
+      return Pose2(10 * std::sin(s), 6 * (1 - std::cos(s)), s);
+    });
+    Trajectory est = ref;
+    for (size_t i = 0; i < est.size(); i += 2) est[i].T_world_base.translation().x() += 0.1;
+    WriteTrajectoryTum(ref, ref_);
+    WriteTrajectoryTum(est, est_);
+  }
+  fl::test::TempDir dir_;
+  std::string ref_, est_;
+};
+
+TEST_F(EvalMain, Help) {
+  const Result r = RunEval("--help");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--max-dt"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--kitti-lengths"), std::string::npos);
+}
+
+TEST_F(EvalMain, GoodRunPrintsTableAndWritesJsonAndPlots) {
+  const Result r = RunEval(est_ + " " + ref_ + " --align none --json " + dir_.file("out.json") +
+                           " --plot " + dir_.file("p"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("ATE translation [m]"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("0.0707"), std::string::npos) << r.output;  // 0.1 / sqrt(2)
+  EXPECT_NE(r.output.find("KITTI segment drift"), std::string::npos);
+  std::ifstream j(dir_.file("out.json"));
+  const std::string json((std::istreambuf_iterator<char>(j)), std::istreambuf_iterator<char>());
+  EXPECT_NE(json.find("\"ate\": {\"trans_m\": {\"rmse\": 0.070710678"), std::string::npos) << json;
+  EXPECT_TRUE(std::filesystem::exists(dir_.file("p_traj.png")));
+  EXPECT_TRUE(std::filesystem::exists(dir_.file("p_errors.png")));
+}
+
+TEST_F(EvalMain, BadInputsExitNonZeroWithReason) {
+  std::ofstream(dir_.file("nan.txt")) << "0 0 0 0\n0.1 nan 0 0\n";
+  Result r = RunEval(dir_.file("nan.txt") + " " + ref_);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("NaN"), std::string::npos) << r.output;
+
+  Trajectory late = fl::test::MakeStraightTrajectory(20, 1.0, 500000000);
+  WriteTrajectoryTum(late, dir_.file("late.tum"));
+  r = RunEval(dir_.file("late.tum") + " " + ref_);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("no pair within 10 ms"), std::string::npos) << r.output;
+
+  r = RunEval(est_ + " " + ref_ + " --format xyz");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("unknown trajectory format"), std::string::npos) << r.output;
+
+  std::ofstream(dir_.file("empty.txt")) << "# no poses\n";
+  r = RunEval(dir_.file("empty.txt") + " " + ref_);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("no poses"), std::string::npos) << r.output;
+
+  r = RunEval(est_ + " " + ref_ + " --align affine");
+  EXPECT_EQ(r.exit_code, 1);
+  r = RunEval(est_);  // missing REF
+  EXPECT_EQ(r.exit_code, 2);
+}
+
+}  // namespace
+}  // namespace fl::eval
