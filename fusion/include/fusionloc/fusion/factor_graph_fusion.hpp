@@ -25,6 +25,7 @@
 // is within attach_tolerance_s; the small time offset between the factor time t and its node
 // time n is then corrected by INTERPOLATING the RBPF poses of the two nodes around t:
 //     T_n_t = T_rbpf(n)^-1 * Interp(T_rbpf(a), T_rbpf(b), (t - a) / (b - a))
+//     Interp(A, B, s) = A * Exp(s * Log(A^-1 B))   (SE(2) constant-velocity arc)
 //     measurement used:  T_ni_nj = T_ni_ti * T_ti_tj * T_tj_nj
 // (the information is kept: the correction spans < one laser period). A factor whose time
 // lies beyond the newest node waits (pending) until the laser node for that time exists, so

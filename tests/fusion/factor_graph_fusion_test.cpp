@@ -1,0 +1,392 @@
+#include "fusionloc/fusion/factor_graph_fusion.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+
+#include "fusion_fixtures.hpp"
+
+namespace fl::fusion {
+namespace {
+
+using fl::test::FusionSimData;
+using fl::test::FusionSimOptions;
+using fl::test::MakeRoundedSquareSim;
+
+FusionOptions TestOptions() {
+  FusionOptions o;
+  o.full_solve_every_n_nodes = 0;  // the tests decide when to solve
+  return o;
+}
+
+double PositionError(const Pose2& a, const Pose2& b) { return std::hypot(a.x - b.x, a.y - b.y); }
+
+double MaxError(const std::vector<TrajectoryPoint>& est, const std::vector<TrajectoryPoint>& ref) {
+  double worst = 0.0;
+  for (size_t k = 0; k < std::min(est.size(), ref.size()); ++k) {
+    worst = std::max(worst, PositionError(est[k].T_map_base, ref[k].T_map_base));
+  }
+  return worst;
+}
+
+double RmsError(const std::vector<TrajectoryPoint>& est, const std::vector<TrajectoryPoint>& ref) {
+  double sum = 0.0;
+  for (size_t k = 0; k < est.size(); ++k) {
+    const double e = PositionError(est[k].T_map_base, ref[k].T_map_base);
+    sum += e * e;
+  }
+  return std::sqrt(sum / static_cast<double>(est.size()));
+}
+
+// Feeds a whole simulation in time order, updating after every node.
+std::vector<TrajectoryPoint> RunInOrder(const FusionSimData& d, FactorGraphFusion* fusion,
+                                        bool with_vision = true) {
+  size_t lf = 0, vf = 0;
+  for (size_t k = 0; k < d.rbpf.size(); ++k) {
+    EXPECT_TRUE(fusion->AddLaserPose(d.rbpf[k].utime, d.rbpf[k].T_map_base).ok());
+    while (lf < d.laser_factors.size() && d.laser_factors[lf].utime_j <= d.rbpf[k].utime) {
+      EXPECT_TRUE(fusion->AddFactor(d.laser_factors[lf++]).ok());
+    }
+    while (with_vision && vf < d.vision_factors.size() &&
+           d.vision_factors[vf].utime_j <= d.rbpf[k].utime) {
+      EXPECT_TRUE(fusion->AddFactor(d.vision_factors[vf++]).ok());
+    }
+    fusion->Update();
+  }
+  for (const auto& f : d.loop_factors) EXPECT_TRUE(fusion->AddFactor(f).ok());
+  return fusion->Trajectory();
+}
+
+TEST(FusionFactorGraph, SquareWithLoopClosureConvergesToTruth) {
+  // Exact measurements, strongly drifting RBPF initial values (0.04 rad/s heading bias).
+  // Vision keyframes on the laser times here: off-node times are corrected with the RBPF's
+  // relative motion, which this artificial bias makes inconsistent with the exact laser
+  // factors (interpolation is tested on its own below).
+  FusionSimOptions so;
+  so.vision_offset_s = 0.0;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion fusion(TestOptions());
+  RunInOrder(d, &fusion);
+  EXPECT_GT(MaxError(d.rbpf, d.truth), 1.0);  // the initial values are far off
+  EXPECT_TRUE(fusion.full_solve_requested());  // the loop closure asks for it
+  const SolveSummary s = fusion.FullSolve();
+  EXPECT_TRUE(s.ran && s.full);
+  EXPECT_EQ(s.termination, "CONVERGENCE") << s.ToString();
+  EXPECT_FALSE(fusion.full_solve_requested());
+  EXPECT_LT(MaxError(fusion.Trajectory(), d.truth), 1e-3);
+}
+
+TEST(FusionFactorGraph, NoisyFusionBeatsLaserAloneAndGaugeIsFixed) {
+  FusionSimOptions so;
+  so.laser_sigma_xy = 0.02;
+  so.laser_sigma_theta = 0.01;
+  so.vision_sigma_xy = 0.02;
+  so.vision_sigma_theta = 0.003;
+  so.loop_closure = false;
+  so.seed = 3;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion laser_only(TestOptions()), fused(TestOptions());
+  RunInOrder(d, &laser_only, /*with_vision=*/false);
+  RunInOrder(d, &fused);
+  laser_only.FullSolve();
+  fused.FullSolve();
+  const double e_laser = RmsError(laser_only.Trajectory(), d.truth);
+  const double e_fused = RmsError(fused.Trajectory(), d.truth);
+  EXPECT_LT(e_fused, 0.7 * e_laser) << "laser " << e_laser << " fused " << e_fused;
+  // Gauge: the first node stays at its prior (the first RBPF pose).
+  const Pose2 first = fused.Trajectory().front().T_map_base;
+  EXPECT_LT(PositionError(first, d.rbpf.front().T_map_base), 1e-4);
+  EXPECT_LT(std::fabs(WrapAngle(first.theta - d.rbpf.front().T_map_base.theta)), 1e-4);
+}
+
+TEST(FusionFactorGraph, SameInputGivesIdenticalOutput) {
+  FusionSimOptions so;
+  so.laser_sigma_xy = 0.02;
+  so.vision_sigma_xy = 0.02;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion a(TestOptions()), b(TestOptions());
+  RunInOrder(d, &a);
+  RunInOrder(d, &b);
+  a.FullSolve();
+  b.FullSolve();
+  const auto ta = a.Trajectory(), tb = b.Trajectory();
+  ASSERT_EQ(ta.size(), tb.size());
+  for (size_t k = 0; k < ta.size(); ++k) {
+    EXPECT_EQ(ta[k].T_map_base.x, tb[k].T_map_base.x);
+    EXPECT_EQ(ta[k].T_map_base.y, tb[k].T_map_base.y);
+    EXPECT_EQ(ta[k].T_map_base.theta, tb[k].T_map_base.theta);
+  }
+}
+
+// A vision factor between times that fall between laser nodes is moved onto the nearest
+// nodes by interpolating the laser poses: with exact data the nodes must not move, while a
+// naive "nearest node, same measurement" attachment would pull them by centimetres.
+TEST(FusionFactorGraph, AsynchronousVisionFactorIsPlacedByInterpolation) {
+  FusionSimOptions so;
+  so.rbpf_heading_bias = 0.0;  // RBPF poses = truth
+  so.loop_closure = false;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion fusion(TestOptions());
+  for (const auto& p : d.rbpf) ASSERT_TRUE(fusion.AddLaserPose(p.utime, p.T_map_base).ok());
+  // Keyframes at 3.03 s and 5.53 s after start (nodes at 3.0 and 5.5): the robot is on the
+  // first straight and then in the first corner, moving 1 m/s (3 cm per 30 ms).
+  const Utime t0 = so.start_utime;
+  const Utime ti = t0 + SecondsToUtime(3.03), tj = t0 + SecondsToUtime(5.53);
+  const Pose2 truth_i = fl::test::RoundedSquarePose(so, 3.03), truth_j =
+                                                                   fl::test::RoundedSquarePose(so, 5.53);
+  RelativePoseFactor f;
+  f.utime_i = ti;
+  f.utime_j = tj;
+  f.T_i_j = truth_i.between(truth_j).ToIsometry3();
+  f.information = Eigen::Matrix<double, 6, 6>::Identity() * 1e4;
+  f.source = FactorSource::kVision;
+  ASSERT_TRUE(fusion.AddFactor(f).ok());
+  // Hold node 30 with a strong laser-style link to node 0 so node 55 is only moved by the
+  // vision factor.
+  RelativePoseFactor anchor;
+  anchor.utime_i = d.truth[0].utime;
+  anchor.utime_j = d.truth[30].utime;
+  anchor.T_i_j = d.truth[0].T_map_base.between(d.truth[30].T_map_base).ToIsometry3();
+  anchor.information.diagonal() << 1e8, 1e8, 0, 0, 0, 1e8;
+  ASSERT_TRUE(fusion.AddFactor(anchor).ok());
+  fusion.FullSolve();
+  const auto traj = fusion.Trajectory();
+  EXPECT_LT(PositionError(traj[55].T_map_base, d.truth[55].T_map_base), 1e-4);
+  EXPECT_LT(std::fabs(WrapAngle(traj[55].T_map_base.theta - d.truth[55].T_map_base.theta)), 1e-4);
+  // The offset the interpolation corrects is large enough for this test to fail without it.
+  EXPECT_GT(PositionError(truth_j, d.truth[55].T_map_base), 0.02);
+}
+
+TEST(FusionFactorGraph, OutOfOrderAndEarlyFactorsGiveTheSameResult) {
+  FusionSimOptions so;
+  so.laser_sigma_xy = 0.02;
+  so.vision_sigma_xy = 0.02;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion in_order(TestOptions()), shuffled(TestOptions());
+  RunInOrder(d, &in_order);
+  in_order.FullSolve();
+  // All factors first (they wait for their nodes), in random order, then the laser poses.
+  std::vector<RelativePoseFactor> all = d.laser_factors;
+  all.insert(all.end(), d.vision_factors.begin(), d.vision_factors.end());
+  all.insert(all.end(), d.loop_factors.begin(), d.loop_factors.end());
+  std::mt19937 rng(5);
+  std::shuffle(all.begin(), all.end(), rng);
+  for (const auto& f : all) ASSERT_TRUE(shuffled.AddFactor(f).ok());
+  EXPECT_EQ(shuffled.num_pending_factors(), static_cast<int>(all.size()));
+  for (const auto& p : d.rbpf) ASSERT_TRUE(shuffled.AddLaserPose(p.utime, p.T_map_base).ok());
+  EXPECT_EQ(shuffled.num_pending_factors(), 0);
+  EXPECT_EQ(shuffled.num_factors(), in_order.num_factors());
+  shuffled.FullSolve();
+  // Same optimum; the solver's start (no window updates here) differs within its tolerance.
+  EXPECT_LT(MaxError(shuffled.Trajectory(), in_order.Trajectory()), 1e-3);
+}
+
+TEST(FusionFactorGraph, LateFactorExtendsTheWindowOrRequestsAFullSolve) {
+  FusionSimOptions so;
+  so.loop_closure = false;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FusionOptions o = TestOptions();
+  o.window_size = 10;
+  o.max_window_nodes = 40;
+  FactorGraphFusion fusion(o);
+  RunInOrder(d, &fusion, /*with_vision=*/false);
+  EXPECT_FALSE(fusion.full_solve_requested());
+  // A late vision factor 30 nodes back: the window grows to reach it.
+  RelativePoseFactor late = d.vision_factors[d.vision_factors.size() - 6];
+  ASSERT_TRUE(fusion.AddFactor(late).ok());
+  SolveSummary s = fusion.Update();
+  EXPECT_GT(s.num_nodes, 10);
+  EXPECT_LE(s.num_nodes, 40);
+  EXPECT_FALSE(fusion.full_solve_requested());
+  // One far back: the full solve is requested.
+  ASSERT_TRUE(fusion.AddFactor(d.vision_factors[1]).ok());
+  s = fusion.Update();
+  EXPECT_EQ(s.num_nodes, 10);
+  EXPECT_TRUE(fusion.full_solve_requested());
+}
+
+TEST(FusionFactorGraph, AsyncFullSolveMergesNodesAddedMeanwhile) {
+  FusionSimOptions so;
+  so.laps = 2;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion fusion(TestOptions());
+  const size_t half = d.rbpf.size() / 2;
+  for (size_t k = 0; k < half; ++k) {
+    ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[k].utime, d.rbpf[k].T_map_base).ok());
+    if (k > 0) {
+      ASSERT_TRUE(fusion.AddFactor(d.laser_factors[k - 1]).ok());
+    }
+    fusion.Update();
+  }
+  // Loop closure at the end of lap 1: node half-1 sees node 0.
+  RelativePoseFactor loop;
+  loop.utime_i = d.truth[half - 1].utime;
+  loop.utime_j = d.truth[0].utime;
+  loop.T_i_j = d.truth[half - 1].T_map_base.between(d.truth[0].T_map_base).ToIsometry3();
+  loop.information.diagonal() << 1e4, 1e4, 0, 0, 0, 1e5;
+  loop.is_loop_closure = true;
+  ASSERT_TRUE(fusion.AddFactor(loop).ok());
+  ASSERT_TRUE(fusion.full_solve_requested());
+  auto job = fusion.PrepareFullSolve();
+  // While the job would run on another thread, the graph keeps growing.
+  for (size_t k = half; k < half + 20; ++k) {
+    ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[k].utime, d.rbpf[k].T_map_base).ok());
+    ASSERT_TRUE(fusion.AddFactor(d.laser_factors[k - 1]).ok());
+    fusion.Update();
+  }
+  job->Run();
+  fusion.ApplyFullSolve(*job);
+  EXPECT_EQ(fusion.counters().full_solves, 1);
+  const auto traj = fusion.Trajectory();
+  // Lap 1 is corrected to the truth, and so are the 20 nodes added during the solve.
+  for (size_t k = 0; k < half + 20; ++k) {
+    EXPECT_LT(PositionError(traj[k].T_map_base, d.truth[k].T_map_base), 1e-3) << k;
+  }
+}
+
+TEST(FusionFactorGraph, WheelOdometryFactorsLinkNodes) {
+  FusionSimOptions so;
+  so.loop_closure = false;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion fusion(TestOptions());
+  // Odometry at 50 Hz = truth in its own frame (rotated and shifted); no other factors.
+  const Pose2 T_odom_map(3.0, -2.0, 0.7);
+  size_t node = 0;
+  for (Utime t = so.start_utime; t <= d.truth.back().utime + 20000; t += 20000) {
+    while (node < d.rbpf.size() && d.rbpf[node].utime <= t) {
+      ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[node].utime, d.rbpf[node].T_map_base).ok());
+      ++node;
+    }
+    const Pose2 truth = fl::test::RoundedSquarePose(so, UtimeToSeconds(t - so.start_utime));
+    ASSERT_TRUE(fusion.AddOdometry(t, T_odom_map * truth).ok());
+  }
+  EXPECT_EQ(fusion.counters().odometry_gaps, 0);
+  EXPECT_EQ(fusion.num_factors(), static_cast<int>(d.rbpf.size()));  // prior + n-1 odometry
+  fusion.FullSolve();
+  // Odometry is interpolated linearly between 50 Hz samples: centimetre-level in corners.
+  EXPECT_LT(MaxError(fusion.Trajectory(), d.truth), 0.02);
+  // Out-of-order odometry is rejected.
+  EXPECT_FALSE(fusion.AddOdometry(so.start_utime, Pose2()).ok());
+  EXPECT_EQ(fusion.counters().rejected_odometry, 1);
+}
+
+// Every bad input is rejected with an error and a counter, and the graph is unchanged.
+TEST(FusionFactorGraph, BadInputIsRejectedAndCountedWithoutCorruptingTheGraph) {
+  FusionSimOptions so;
+  so.loop_closure = false;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion fusion(TestOptions());
+  for (size_t k = 0; k < 40; ++k) {
+    ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[k].utime, d.rbpf[k].T_map_base).ok());
+    if (k > 0) {
+      ASSERT_TRUE(fusion.AddFactor(d.laser_factors[k - 1]).ok());
+    }
+  }
+  fusion.Update();
+  const int factors = fusion.num_factors();
+  const auto before = fusion.Trajectory();
+  const RelativePoseFactor good = d.laser_factors[5];
+  const FusionCounters c0 = fusion.counters();
+
+  RelativePoseFactor f = good;
+  f.T_i_j.translation().x() = std::nan("");
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  f = good;
+  f.information(0, 0) = std::nan("");
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  EXPECT_EQ(fusion.counters().rejected_non_finite, c0.rejected_non_finite + 2);
+
+  f = good;
+  f.information(0, 1) = 5.0;  // non-symmetric
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  f = good;
+  f.information(5, 5) = 0.0;  // singular
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  f = good;
+  f.information(1, 1) = -1.0;  // indefinite
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  f = good;
+  f.information = Eigen::Matrix<double, 6, 6>::Identity();
+  f.information(3, 3) = 0.0;  // 6-DoF but singular in roll
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  EXPECT_EQ(fusion.counters().rejected_information, c0.rejected_information + 4);
+
+  f = good;
+  f.utime_i = d.rbpf.front().utime - SecondsToUtime(5.0);  // before the first node
+  const Status s = fusion.AddFactor(f);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("no laser node"), std::string::npos) << s.message();
+  f = good;
+  f.utime_j = f.utime_i + 20000;  // both on one node
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  f = good;
+  f.T_i_j.linear() *= 2.0;  // not a rotation
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  EXPECT_EQ(fusion.counters().rejected_no_node, c0.rejected_no_node + 1);
+  EXPECT_EQ(fusion.counters().rejected_same_node, c0.rejected_same_node + 1);
+
+  // Laser poses: NaN and going back in time.
+  EXPECT_FALSE(fusion.AddLaserPose(d.rbpf[40].utime, Pose2(std::nan(""), 0, 0)).ok());
+  EXPECT_FALSE(fusion.AddLaserPose(d.rbpf[10].utime, d.rbpf[10].T_map_base).ok());
+  EXPECT_EQ(fusion.counters().rejected_node_time, c0.rejected_node_time + 1);
+
+  EXPECT_EQ(fusion.num_factors(), factors);
+  EXPECT_EQ(fusion.num_nodes(), 40);
+  EXPECT_EQ(fusion.num_pending_factors(), 0);
+  const auto after = fusion.Trajectory();
+  ASSERT_EQ(after.size(), before.size());
+  for (size_t k = 0; k < after.size(); ++k) {
+    EXPECT_EQ(after[k].T_map_base.x, before[k].T_map_base.x);
+  }
+  // A factor in a laser gap: nodes 40 and 41 are 2 s apart; a time in between matches none.
+  ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[60].utime, d.rbpf[60].T_map_base).ok());
+  f = good;
+  f.utime_i = d.rbpf[39].utime;
+  f.utime_j = d.rbpf[50].utime;
+  EXPECT_FALSE(fusion.AddFactor(f).ok());
+  EXPECT_EQ(fusion.counters().rejected_no_node, c0.rejected_no_node + 2);
+  // The graph still solves.
+  EXPECT_TRUE(fusion.Update().ran);
+}
+
+TEST(FusionFactorGraph, VisionInformationIsMarginalisedToThePlane) {
+  Eigen::Matrix<double, 6, 6> a = Eigen::Matrix<double, 6, 6>::Identity();
+  a(0, 2) = 0.5;  // x correlated with z
+  a(5, 3) = 0.4;  // yaw correlated with roll
+  const Eigen::Matrix<double, 6, 6> cov = a * a.transpose() * 0.01;
+  Eigen::Matrix3d planar;
+  std::string reason;
+  ASSERT_TRUE(ReduceInformationToPlanar(cov.inverse(), &planar, &reason)) << reason;
+  const int idx[3] = {0, 1, 5};
+  Eigen::Matrix3d cov3;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) cov3(r, c) = cov(idx[r], idx[c]);
+  EXPECT_LT((planar - cov3.inverse()).norm(), 1e-6 * cov3.inverse().norm());
+  // Cutting rows of the information would be over-confident in x.
+  EXPECT_GT(cov.inverse()(0, 0), planar(0, 0) * 1.1);
+  // Planar producers: the (x, y, yaw) block is used directly.
+  Eigen::Matrix<double, 6, 6> p = Eigen::Matrix<double, 6, 6>::Zero();
+  p(0, 0) = 4;
+  p(1, 1) = 9;
+  p(5, 5) = 16;
+  p(0, 5) = p(5, 0) = 1;
+  ASSERT_TRUE(ReduceInformationToPlanar(p, &planar, &reason)) << reason;
+  EXPECT_EQ(planar(0, 0), 4);
+  EXPECT_EQ(planar(2, 2), 16);
+  EXPECT_EQ(planar(0, 2), 1);
+}
+
+TEST(FusionFactorGraph, OptionsValidateWithClearErrors) {
+  FusionOptions o;
+  EXPECT_TRUE(o.Validate().ok());
+  o.robust_loss = "tukey";
+  EXPECT_NE(o.Validate().message().find("robust_loss"), std::string::npos);
+  o = FusionOptions();
+  o.window_size = 1;
+  EXPECT_FALSE(o.Validate().ok());
+  EXPECT_THROW(FactorGraphFusion bad(o), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace fl::fusion
