@@ -7,12 +7,11 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "fusionloc/common/lcm_interface.hpp"
 
@@ -24,8 +23,8 @@ inline void WriteText(const std::string& path, const std::string& text) {
 }
 
 // One FLASER line with `n` beams, all of range `r`, at pose (x, y, th) = odom, time t.
-inline std::string CarmenFlaser(int n, double r, double x, double y, double th, double t,
-                                double ox, double oy, double oth) {
+inline std::string CarmenFlaser(int n, double r, double x, double y, double th, double t, double ox,
+                                double oy, double oth) {
   std::ostringstream ss;
   ss.precision(10);
   ss << "FLASER " << n;
@@ -137,8 +136,8 @@ struct KittiRawFixture {
     calib << "P_rect_00: " << fx << " 0 " << width / 2.0 << " 0 0 " << fx << " " << height / 2.0
           << " 0 0 0 1 0\n";
     calib << "S_rect_01: " << width << " " << height << "\n";
-    calib << "P_rect_01: " << right_fx << " 0 " << width / 2.0 << " " << -0.5 * right_fx
-          << " 0 " << right_fx << " " << height / 2.0 << " 0 0 0 1 0\n";
+    calib << "P_rect_01: " << right_fx << " 0 " << width / 2.0 << " " << -0.5 * right_fx << " 0 "
+          << right_fx << " " << height / 2.0 << " 0 0 0 1 0\n";
     calib << "R_rect_00: 1 0 0 0 1 0 0 0 1\n";
     WriteText(root + "/calib_cam_to_cam.txt", calib.str());
     if (write_oxts) {

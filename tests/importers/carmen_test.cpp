@@ -78,9 +78,9 @@ TEST(CarmenTest, ConvertsRawMitCsailWithItsOwnOdometry) {
 }
 
 TEST(CarmenTest, ConvertsEveryCorrectedLogWithGroundTruth) {
-  const std::vector<std::pair<std::string, int>> logs = {
-      {"intel-corrected.log.gz", 910}, {"aces-corrected.log.gz", 440},
-      {"csail-corrected.log.gz", 406}};
+  const std::vector<std::pair<std::string, int>> logs = {{"intel-corrected.log.gz", 910},
+                                                         {"aces-corrected.log.gz", 440},
+                                                         {"csail-corrected.log.gz", 406}};
   for (const auto& [name, scans] : logs) {
     SCOPED_TRACE(name);
     const std::string in = Laser(name);
@@ -104,8 +104,8 @@ TEST(CarmenTest, ConvertsEveryCorrectedLogWithGroundTruth) {
     EXPECT_GT(std::hypot(odo.x - gt.pos[0], odo.y - gt.pos[1]), 0.01);
     const auto first = log.Decode<bot_core::planar_lidar_t>(channels::kLaser, 0);
     EXPECT_FLOAT_EQ(first.rad0, static_cast<float>(-M_PI / 2));
-    EXPECT_FLOAT_EQ(first.radstep, static_cast<float>(first.nranges >= 360 ? M_PI / 360
-                                                                            : M_PI / 180));
+    EXPECT_FLOAT_EQ(first.radstep,
+                    static_cast<float>(first.nranges >= 360 ? M_PI / 360 : M_PI / 180));
   }
 }
 
@@ -163,7 +163,8 @@ TEST(CarmenTest, RawLogKeepsOdomLinesInFileOrder) {
   text += "ODOM 1.5 2.5 0.2 0.3 0.05 0 10.05 host 10.05\n";
   text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.1, 2, 3, 0.3);
   fl::test::WriteText(dir.file("small.log"), text);
-  const ConvertSummary s = ConvertCarmen(CarmenOptions{}, dir.file("small.log"), dir.file("o.lcmlog"));
+  const ConvertSummary s =
+      ConvertCarmen(CarmenOptions{}, dir.file("small.log"), dir.file("o.lcmlog"));
   EXPECT_EQ(s.messages.at(channels::kOdometry), 3);
   EXPECT_EQ(s.messages.at(channels::kLaser), 2);
   const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
@@ -321,8 +322,7 @@ TEST(CarmenBadInputTest, NonNumericField) {
 TEST(CarmenBadInputTest, BeamCountDoesNotMatchN) {
   TempDir dir;
   // n says 4 but 5 ranges follow: one field too many.
-  fl::test::WriteText(dir.file("n.log"),
-                      "# c\nFLASER 4 1 1 1 1 1 0 0 0 0 0 0 10.0 host 10.0\n");
+  fl::test::WriteText(dir.file("n.log"), "# c\nFLASER 4 1 1 1 1 1 0 0 0 0 0 0 10.0 host 10.0\n");
   const std::string msg =
       ExpectConvertError(CarmenOptions{}, dir.file("n.log"), dir.file("o.lcmlog"));
   EXPECT_NE(msg.find("n.log:2:"), std::string::npos) << msg;
@@ -358,8 +358,8 @@ TEST(CarmenBadInputTest, TruncatedGzip) {
   // The whole file reads back the same through the gzip path.
   EXPECT_EQ(ReadCarmenLog(dir.file("full.log.gz")).scans.size(), 400u);
   fl::test::WriteText(dir.file("cut-corrected.log.gz"), bytes.substr(0, bytes.size() / 2));
-  const std::string msg = ExpectConvertError(CarmenOptions{}, dir.file("cut-corrected.log.gz"),
-                                             dir.file("o.lcmlog"));
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("cut-corrected.log.gz"), dir.file("o.lcmlog"));
   EXPECT_NE(msg.find("cut-corrected.log.gz:"), std::string::npos) << msg;
   EXPECT_TRUE(msg.find("truncated") != std::string::npos) << msg;
 }

@@ -97,13 +97,14 @@ TEST(KittiTest, ConvertsTheRealDrive) {
   double length = 0;
   Eigen::Vector3d prev = Eigen::Vector3d::Zero();
   for (size_t i = 1; i < 108; ++i) {
-    const Eigen::Vector3d p = PoseOf(log.Decode<bot_core::pose_t>(channels::kGroundTruth, i)).translation();
+    const Eigen::Vector3d p =
+        PoseOf(log.Decode<bot_core::pose_t>(channels::kGroundTruth, i)).translation();
     length += (p - prev).norm();
     prev = p;
   }
   EXPECT_NEAR(length, 107.0, 3.0);
   const auto gt1 = log.Decode<bot_core::pose_t>(channels::kGroundTruth, 1);
-  EXPECT_GT(gt1.pos[0], 0.5);                      // forward
+  EXPECT_GT(gt1.pos[0], 0.5);                         // forward
   EXPECT_LT(std::abs(gt1.pos[2]), 0.1 * gt1.pos[0]);  // on the ground
   const auto& t = log.utimes.at(channels::kStereo);
   for (size_t i = 1; i < t.size(); ++i) ASSERT_GT(t[i], t[i - 1]);
@@ -135,7 +136,8 @@ TEST(KittiTest, GroundTruthIsTheBaseFramePose) {
   const auto cal = log.Decode<fusionloc::stereo_calibration_t>(channels::kStereoCalibration, 0);
   EXPECT_DOUBLE_EQ(cal.baseline, 0.5);
   // T_base_camera: rotation optical -> base, no translation for cam0.
-  const Eigen::Isometry3d T_bc = IsometryFromArrays(cal.T_base_camera.trans, cal.T_base_camera.quat);
+  const Eigen::Isometry3d T_bc =
+      IsometryFromArrays(cal.T_base_camera.trans, cal.T_base_camera.quat);
   EXPECT_TRUE(T_bc.linear().isApprox(RotationBaseCamera(), 1e-12));
   EXPECT_NEAR(T_bc.translation().norm(), 0.0, 1e-12);
 }
@@ -186,8 +188,7 @@ TEST(KittiTest, OxtsPosesReproduceThePoseFile) {
   for (size_t i = 0; i < oxts.size(); ++i) {
     EXPECT_LT((oxts[i].translation() - seq.T_cam0start_cam0[i].translation()).norm(), 1e-5) << i;
     const Eigen::Matrix3d dR = oxts[i].linear().transpose() * seq.T_cam0start_cam0[i].linear();
-    EXPECT_LT(Eigen::AngleAxisd(dR).angle(), 1e-6)
-        << i;
+    EXPECT_LT(Eigen::AngleAxisd(dR).angle(), 1e-6) << i;
   }
 }
 
@@ -238,7 +239,8 @@ TEST(KittiBadInputTest, UnreadableImage) {
 TEST(KittiBadInputTest, MismatchedLeftRightCounts) {
   TempDir dir;
   fl::test::KittiRawFixture().Write(dir.file("d"));
-  fs::copy_file(dir.file("d/image_00/data/0000000000.png"), dir.file("d/image_00/data/0000000003.png"));
+  fs::copy_file(dir.file("d/image_00/data/0000000000.png"),
+                dir.file("d/image_00/data/0000000003.png"));
   const std::string msg = ExpectConvertError(KittiOptions{}, dir.file("d"), dir.file("o.lcmlog"));
   EXPECT_NE(msg.find("4 left vs 3 right"), std::string::npos) << msg;
 }
@@ -258,7 +260,8 @@ TEST(KittiBadInputTest, InconsistentCalibration) {
   fl::test::KittiRawFixture ok;
   ok.Write(dir2.file("d"));
   cv::imwrite(dir2.file("d/image_01/data/0000000001.png"), cv::Mat(9, 16, CV_8UC1, cv::Scalar(0)));
-  const std::string msg2 = ExpectConvertError(KittiOptions{}, dir2.file("d"), dir2.file("o.lcmlog"));
+  const std::string msg2 =
+      ExpectConvertError(KittiOptions{}, dir2.file("d"), dir2.file("o.lcmlog"));
   EXPECT_NE(msg2.find("0000000001.png: image is 16x9 but the calibration says 16x8"),
             std::string::npos)
       << msg2;
@@ -267,14 +270,16 @@ TEST(KittiBadInputTest, InconsistentCalibration) {
 TEST(KittiBadInputTest, EmptyFolder) {
   TempDir dir;
   fs::create_directories(dir.file("empty"));
-  const std::string msg = ExpectConvertError(KittiOptions{}, dir.file("empty"), dir.file("o.lcmlog"));
+  const std::string msg =
+      ExpectConvertError(KittiOptions{}, dir.file("empty"), dir.file("o.lcmlog"));
   EXPECT_NE(msg.find("not a KITTI folder"), std::string::npos) << msg;
   // Image folders present but empty.
   fl::test::KittiRawFixture().Write(dir.file("d"));
   for (const auto& e : fs::directory_iterator(dir.file("d/image_00/data"))) fs::remove(e.path());
   const std::string msg2 = ExpectConvertError(KittiOptions{}, dir.file("d"), dir.file("o.lcmlog"));
   EXPECT_NE(msg2.find("image_00/data: no .png images (empty folder)"), std::string::npos) << msg2;
-  const std::string msg3 = ExpectConvertError(KittiOptions{}, dir.file("nope"), dir.file("o.lcmlog"));
+  const std::string msg3 =
+      ExpectConvertError(KittiOptions{}, dir.file("nope"), dir.file("o.lcmlog"));
   EXPECT_NE(msg3.find("nope: no such folder"), std::string::npos) << msg3;
 }
 
@@ -289,11 +294,13 @@ TEST(KittiBadInputTest, BadTimestampsAndPoses) {
   TempDir dir2;
   fl::test::KittiRawFixture().Write(dir2.file("d"));
   fl::test::WriteText(dir2.file("d/poses_cam0_from_oxts.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n");
-  const std::string msg2 = ExpectConvertError(KittiOptions{}, dir2.file("d"), dir2.file("o.lcmlog"));
+  const std::string msg2 =
+      ExpectConvertError(KittiOptions{}, dir2.file("d"), dir2.file("o.lcmlog"));
   EXPECT_NE(msg2.find("1 poses for 3 frames"), std::string::npos) << msg2;
   fl::test::WriteText(dir2.file("d/poses_cam0_from_oxts.txt"),
                       "1 0 0 0 0 1 0 0 0 0 1 0\n2 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n");
-  const std::string msg3 = ExpectConvertError(KittiOptions{}, dir2.file("d"), dir2.file("o.lcmlog"));
+  const std::string msg3 =
+      ExpectConvertError(KittiOptions{}, dir2.file("d"), dir2.file("o.lcmlog"));
   EXPECT_NE(msg3.find("poses_cam0_from_oxts.txt:2: the 3x3 part is not a rotation"),
             std::string::npos)
       << msg3;

@@ -20,8 +20,8 @@ struct Result {
 
 Result RunProgram(const TempDir& dir, const std::string& args) {
   const std::string out = dir.file("stdout.txt"), err = dir.file("stderr.txt");
-  const std::string cmd = "cd '" + dir.path() + "' && " + fl::test::BinDir() + "/" + args +
-                          " > '" + out + "' 2> '" + err + "'";
+  const std::string cmd = "cd '" + dir.path() + "' && " + fl::test::BinDir() + "/" + args + " > '" +
+                          out + "' 2> '" + err + "'";
   const int raw = std::system(cmd.c_str());
   Result r;
   r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;

@@ -93,8 +93,8 @@ class LineReader {
       int err = Z_OK;
       const char* msg = gzerror(file_, &err);
       if (err != Z_OK && err != Z_STREAM_END) {
-        throw std::runtime_error(path_ + ": read error after line " + std::to_string(line_) +
-                                 ": " + (msg ? msg : "unknown") +
+        throw std::runtime_error(path_ + ": read error after line " + std::to_string(line_) + ": " +
+                                 (msg ? msg : "unknown") +
                                  " (truncated or corrupt gzip file? re-download it)");
       }
       return false;
@@ -103,8 +103,8 @@ class LineReader {
     int err = Z_OK;
     const char* msg = gzerror(file_, &err);
     if (err != Z_OK && err != Z_STREAM_END) {
-      throw std::runtime_error(path_ + ":" + std::to_string(line_ + 1) + ": read error: " +
-                               (msg ? msg : "unknown") +
+      throw std::runtime_error(path_ + ":" + std::to_string(line_ + 1) +
+                               ": read error: " + (msg ? msg : "unknown") +
                                " (truncated or corrupt gzip file? re-download it)");
     }
     while (!line->empty() && (line->back() == '\n' || line->back() == '\r')) line->pop_back();
@@ -224,7 +224,8 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
       if (t.size() < expected) {
         LineError(path, line,
                   "truncated FLASER line: n = " + std::to_string(n) + " beams need " +
-                      std::to_string(expected) + " fields (FLASER n r_1..r_n x y theta odom_x "
+                      std::to_string(expected) +
+                      " fields (FLASER n r_1..r_n x y theta odom_x "
                       "odom_y odom_theta ipc_timestamp hostname logger_timestamp), found " +
                       std::to_string(t.size()) +
                       " (line cut short, or fewer ranges than n; repair or delete the line)");
@@ -285,10 +286,10 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
   if (log.scans.empty()) {
     std::string seen;
     for (const auto& [k, v] : log.skipped_types) seen += " " + k + " x" + std::to_string(v);
-    throw std::runtime_error(path + ": no FLASER line in " + std::to_string(log.lines) +
-                             " lines" + (seen.empty() ? std::string(" (empty file?)")
-                                                      : " (found:" + seen + ")") +
-                             "; a CARMEN laser log with FLASER scans is needed");
+    throw std::runtime_error(
+        path + ": no FLASER line in " + std::to_string(log.lines) + " lines" +
+        (seen.empty() ? std::string(" (empty file?)") : " (found:" + seen + ")") +
+        "; a CARMEN laser log with FLASER scans is needed");
   }
   return log;
 }
@@ -350,8 +351,7 @@ void RecoverTimestampsByRanges(const CarmenLog& raw, double tolerance, CarmenLog
     }
     if (!found) {
       throw std::runtime_error(
-          log->path + ":" + std::to_string(s.line) + ": no scan of '" + raw.path +
-          "' after line " +
+          log->path + ":" + std::to_string(s.line) + ": no scan of '" + raw.path + "' after line " +
           std::to_string(next > 0 ? raw.scans[next - 1].line : 0) +
           " has the same ranges (within " + std::to_string(tolerance) +
           " m), so its time stamp cannot be recovered; is the raw log of the same run? "
@@ -376,8 +376,8 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
   summary.input = in;
   summary.output = out_log;
   if (!options.timestamps_from.empty()) {
-    const CarmenLog raw = ReadCarmenLog(options.timestamps_from, options.timestamp,
-                                        options.fov_deg);
+    const CarmenLog raw =
+        ReadCarmenLog(options.timestamps_from, options.timestamp, options.fov_deg);
     RecoverTimestampsByRanges(raw, options.range_match_tolerance, &log);
     summary.warnings.push_back("scan time stamps taken from '" + options.timestamps_from +
                                "' by matching ranges (" + std::to_string(log.scans.size()) +
@@ -411,8 +411,9 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
   if (duplicates > 0) {
     std::string hint;
     if (duplicates * 4 > static_cast<int64_t>(log.scans.size())) {
-      hint = " (the log's time stamps have too few digits: give --timestamps-from RAW_LOG of "
-             "the same run to recover them)";
+      hint =
+          " (the log's time stamps have too few digits: give --timestamps-from RAW_LOG of "
+          "the same run to recover them)";
     }
     summary.warnings.push_back(std::to_string(duplicates) +
                                " scans share the time stamp of the scan before; kept" + hint);

@@ -1,5 +1,6 @@
 #include "fusionloc/importers/kitti.hpp"
 
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -8,7 +9,6 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <Eigen/SVD>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <set>
@@ -87,8 +87,8 @@ std::vector<double> ParseNumbers(const std::string& text, size_t count, const st
     v.push_back(x);
   }
   if (v.size() != count) {
-    Fail(path + ":" + std::to_string(line) + ": " + what + ": expected " +
-         std::to_string(count) + " numbers, found " + std::to_string(v.size()));
+    Fail(path + ":" + std::to_string(line) + ": " + what + ": expected " + std::to_string(count) +
+         " numbers, found " + std::to_string(v.size()));
   }
   return v;
 }
@@ -139,7 +139,9 @@ Projection DecomposeProjection(const std::vector<double>& p, const std::string& 
 
 KittiCalibration CheckStereo(const Projection& l, const Projection& r, const std::string& path,
                              const std::string& lk, const std::string& rk) {
-  auto same = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(a)); };
+  auto same = [](double a, double b) {
+    return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(a));
+  };
   if (!same(l.fx, r.fx) || !same(l.fy, r.fy) || !same(l.cx, r.cx) || !same(l.cy, r.cy)) {
     std::ostringstream ss;
     ss << path << ": inconsistent stereo calibration: " << lk << " has fx fy cx cy = " << l.fx
@@ -158,9 +160,9 @@ KittiCalibration CheckStereo(const Projection& l, const Projection& r, const std
   }
   if (std::hypot(d.y(), d.z()) > 0.01 * d.x()) {
     std::ostringstream ss;
-    ss << path << ": inconsistent stereo calibration: " << rk << " is offset by (" << d.y()
-       << ", " << d.z() << ") m in y/z from " << lk << " (more than 1% of the baseline "
-       << d.x() << " m); the pair is not row-rectified";
+    ss << path << ": inconsistent stereo calibration: " << rk << " is offset by (" << d.y() << ", "
+       << d.z() << ") m in y/z from " << lk << " (more than 1% of the baseline " << d.x()
+       << " m); the pair is not row-rectified";
     Fail(ss.str());
   }
   KittiCalibration c;
@@ -307,8 +309,8 @@ bool ParseKittiTimestamp(const std::string& text, Utime* utime) {
   char frac[32] = {0};
   int sec = 0;
   int consumed = 0;
-  if (std::sscanf(text.c_str(), "%4d-%2d-%2d %2d:%2d:%2d%n", &Y, &M, &D, &h, &m, &sec,
-                  &consumed) != 6) {
+  if (std::sscanf(text.c_str(), "%4d-%2d-%2d %2d:%2d:%2d%n", &Y, &M, &D, &h, &m, &sec, &consumed) !=
+      6) {
     return false;
   }
   std::string rest = text.substr(static_cast<size_t>(consumed));
@@ -371,8 +373,8 @@ std::vector<Eigen::Isometry3d> PosesFromOxts(const std::string& folder) {
                                 "OXTS record (lat lon alt roll pitch yaw ...)");
     const double lat = v[0], lon = v[1], alt = v[2];
     if (std::abs(lat) > 85.0 || std::abs(lon) > 180.0) {
-      Fail(files[i] + ":" + std::to_string(lines[0].first) + ": latitude " +
-           std::to_string(lat) + " / longitude " + std::to_string(lon) + " out of range");
+      Fail(files[i] + ":" + std::to_string(lines[0].first) + ": latitude " + std::to_string(lat) +
+           " / longitude " + std::to_string(lon) + " out of range");
     }
     if (i == 0) scale = std::cos(lat * M_PI / 180.0);
     // Mercator projection with the first frame's scale (KITTI devkit convertOxtsToPose).
@@ -391,14 +393,16 @@ std::vector<Eigen::Isometry3d> PosesFromOxts(const std::string& folder) {
 KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& folder) {
   const Status valid = options.Validate();
   if (!valid.ok()) throw std::invalid_argument("KITTI options: " + valid.message());
-  if (!IsDir(folder)) Fail(folder + ": no such folder (give a KITTI raw drive or odometry sequence)");
+  if (!IsDir(folder))
+    Fail(folder + ": no such folder (give a KITTI raw drive or odometry sequence)");
   KittiSequence seq;
   seq.folder = folder;
   const bool raw = IsDir(Join(folder, "image_00"));
   const bool odo_gray = IsDir(Join(folder, "image_0"));
   const bool odo_color = IsDir(Join(folder, "image_2"));
   if (!raw && !odo_gray && !odo_color) {
-    Fail(folder + ": not a KITTI folder: found neither image_00/ (raw drive) nor image_0/ or "
+    Fail(folder +
+         ": not a KITTI folder: found neither image_00/ (raw drive) nor image_0/ or "
          "image_2/ (odometry sequence)");
   }
   seq.raw_layout = raw;
@@ -413,8 +417,8 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     const auto s0 = CalibValue(calib, cpath, "S_rect_00", 2);
     const auto s1 = CalibValue(calib, cpath, "S_rect_01", 2);
     if (s0 != s1) {
-      Fail(cpath + ": inconsistent stereo calibration: S_rect_00 (" + std::to_string(s0[0]) +
-           "x" + std::to_string(s0[1]) + ") and S_rect_01 (" + std::to_string(s1[0]) + "x" +
+      Fail(cpath + ": inconsistent stereo calibration: S_rect_00 (" + std::to_string(s0[0]) + "x" +
+           std::to_string(s0[1]) + ") and S_rect_01 (" + std::to_string(s1[0]) + "x" +
            std::to_string(s1[1]) + ") differ; rectified images share one size");
     }
     width = static_cast<int>(s0[0]);
@@ -422,19 +426,21 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     if (width <= 0 || height <= 0 || width != s0[0] || height != s0[1]) {
       Fail(cpath + ": S_rect_00 is not a positive integer image size");
     }
-    const Projection l = DecomposeProjection(CalibValue(calib, cpath, "P_rect_00", 12), cpath,
-                                             "P_rect_00");
-    const Projection r = DecomposeProjection(CalibValue(calib, cpath, "P_rect_01", 12), cpath,
-                                             "P_rect_01");
+    const Projection l =
+        DecomposeProjection(CalibValue(calib, cpath, "P_rect_00", 12), cpath, "P_rect_00");
+    const Projection r =
+        DecomposeProjection(CalibValue(calib, cpath, "P_rect_01", 12), cpath, "P_rect_01");
     seq.calibration = CheckStereo(l, r, cpath, "P_rect_00", "P_rect_01");
   } else {
     bool color = options.cameras == "color" || (options.cameras == "auto" && !odo_gray);
-    if (options.cameras == "gray" && !odo_gray) Fail(Join(folder, "image_0") + ": folder missing (cameras: gray)");
+    if (options.cameras == "gray" && !odo_gray)
+      Fail(Join(folder, "image_0") + ": folder missing (cameras: gray)");
     if (color && !odo_color) Fail(Join(folder, "image_2") + ": folder missing (cameras: color)");
     left_dir = Join(folder, color ? "image_2" : "image_0");
     right_dir = Join(folder, color ? "image_3" : "image_1");
     const std::string cpath = Join(folder, "calib.txt");
-    if (!IsFile(cpath)) Fail(cpath + ": missing (the sequence's calibration with P0..P3 is needed)");
+    if (!IsFile(cpath))
+      Fail(cpath + ": missing (the sequence's calibration with P0..P3 is needed)");
     const auto calib = ReadCalibFile(cpath);
     const std::string lk = color ? "P2" : "P0", rk = color ? "P3" : "P1";
     const Projection l = DecomposeProjection(CalibValue(calib, cpath, lk, 12), cpath, lk);
@@ -483,7 +489,8 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     }
     // The size comes from the first left image (calib.txt has none); every image is checked.
     const cv::Mat first = cv::imread(seq.left_images[0], cv::IMREAD_UNCHANGED);
-    if (first.empty()) Fail(seq.left_images[0] + ": cannot read image (missing, unreadable or not a PNG)");
+    if (first.empty())
+      Fail(seq.left_images[0] + ": cannot read image (missing, unreadable or not a PNG)");
     width = first.cols;
     height = first.rows;
   }
@@ -513,7 +520,8 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     }
     seq.poses_path = Join(folder, "oxts");
   } else if (!options.allow_no_ground_truth) {
-    Fail(folder + ": no ground truth: neither poses_cam0_from_oxts.txt nor oxts/ here; give "
+    Fail(folder +
+         ": no ground truth: neither poses_cam0_from_oxts.txt nor oxts/ here; give "
          "--poses FILE (12 numbers a line, e.g. KITTI odometry poses/NN.txt) or "
          "--no-ground-truth");
   }
@@ -551,8 +559,7 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
     T_base_camera.linear() = R_bc;
     T_base_camera.translation() = R_bc * c.left_center_in_cam0;
     IsometryToArrays(T_base_camera, cal.T_base_camera.trans, cal.T_base_camera.quat);
-    IsometryToArrays(Eigen::Isometry3d::Identity(), cal.T_base_laser.trans,
-                     cal.T_base_laser.quat);
+    IsometryToArrays(Eigen::Isometry3d::Identity(), cal.T_base_laser.trans, cal.T_base_laser.quat);
   }
 
   int64_t backwards = 0;

@@ -23,10 +23,18 @@ std::string JsonString(const std::string& s) {
   std::string out = "\"";
   for (const char c : s) {
     switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\t': out += "\\t"; break;
+      case '"':
+        out += "\\\"";
+        break;
+      case '\\':
+        out += "\\\\";
+        break;
+      case '\n':
+        out += "\\n";
+        break;
+      case '\t':
+        out += "\\t";
+        break;
       default:
         if (static_cast<unsigned char>(c) < 0x20) {
           char buf[8];
@@ -178,16 +186,15 @@ std::string LogInfo::ToText() const {
      << channels.size() << " channels)\n";
   if (events > 0) {
     ss << "time: " << TimeText(first_utime) << " .. " << TimeText(last_utime) << " (span "
-       << std::fixed << std::setprecision(3) << UtimeToSeconds(last_utime - first_utime)
-       << " s)\n";
+       << std::fixed << std::setprecision(3) << UtimeToSeconds(last_utime - first_utime) << " s)\n";
   }
   size_t wc = 7, wt = 4;
   for (const auto& c : channels) {
     wc = std::max(wc, c.channel.size());
     wt = std::max(wt, c.type.size());
   }
-  ss << std::left << std::setw(static_cast<int>(wc)) << "CHANNEL" << "  "
-     << std::setw(static_cast<int>(wt)) << "TYPE" << std::right << std::setw(9) << "COUNT"
+  ss << std::left << std::setw(static_cast<int>(wc)) << "CHANNEL"
+     << "  " << std::setw(static_cast<int>(wt)) << "TYPE" << std::right << std::setw(9) << "COUNT"
      << std::setw(10) << "RATE_HZ" << std::setw(12) << "BYTES" << std::setw(11) << "FIRST_S"
      << std::setw(11) << "LAST_S" << std::setw(9) << "DEC_ERR" << std::setw(9) << "BACKWD"
      << "\n";

@@ -43,14 +43,14 @@ namespace fl::importers {
 // like real wheel odometry. The normal samples come from std::mt19937_64(seed) through a
 // Box-Muller transform written here, so the output is the same on every platform.
 struct CarmenNoiseModel {
-  double a1 = 0.05;              // [m/m] translation noise per metre travelled
-  double a2 = 0.01;              // [m/rad] translation noise per radian turned
-  double a3 = 0.05;              // [rad/rad] heading noise per radian turned
-  double a4 = 0.01;              // [rad/m] heading noise per metre travelled
-  double min_sigma_xy = 0.001;   // [m] floor of sigma_xy for a moving step
+  double a1 = 0.05;                 // [m/m] translation noise per metre travelled
+  double a2 = 0.01;                 // [m/rad] translation noise per radian turned
+  double a3 = 0.05;                 // [rad/rad] heading noise per radian turned
+  double a4 = 0.01;                 // [rad/m] heading noise per metre travelled
+  double min_sigma_xy = 0.001;      // [m] floor of sigma_xy for a moving step
   double min_sigma_theta = 0.0005;  // [rad] floor of sigma_theta for a moving step
-  double scale_error = 0.0;      // [-] systematic translation scale error (0.01 = 1% long)
-  double yaw_bias = 0.0;         // [rad/m] systematic heading drift per metre travelled
+  double scale_error = 0.0;         // [-] systematic translation scale error (0.01 = 1% long)
+  double yaw_bias = 0.0;            // [rad/m] systematic heading drift per metre travelled
 
   template <class A>
   void Serialize(A* a) {
@@ -71,8 +71,8 @@ struct CarmenOptions {
   // odometry and their poses go to GROUND_TRUTH; raw logs keep their own odometry.
   // "true": treat the log as corrected. "false": treat it as raw.
   std::string noisy_odometry = "auto";
-  uint64_t seed = 1;             // [-] seed of the odometry noise (same seed, same output)
-  CarmenNoiseModel noise;        // noise model for corrected logs
+  uint64_t seed = 1;       // [-] seed of the odometry noise (same seed, same output)
+  CarmenNoiseModel noise;  // noise model for corrected logs
   // Which CARMEN time stamp becomes utime: "ipc" (ipc_timestamp, the time the message was
   // published; absolute Unix time in live CARMEN logs) or "logger" (logger_timestamp, the
   // time the logger wrote it, often relative to the logger's start).
@@ -84,7 +84,7 @@ struct CarmenOptions {
   // an error.
   std::string timestamps_from;
   double range_match_tolerance = 0.006;  // [m] max per-beam difference for a match
-  double fov_deg = 180.0;        // [deg] field of view of FLASER scans (CARMEN: 180)
+  double fov_deg = 180.0;                // [deg] field of view of FLASER scans (CARMEN: 180)
 
   template <class A>
   void Serialize(A* a) {
@@ -100,22 +100,22 @@ struct CarmenOptions {
 };
 
 struct CarmenScan {
-  Utime utime = 0;            // [us] from the chosen time stamp
-  std::vector<float> ranges;  // [m]
-  float rad0 = 0.0f;          // [rad] angle of the first beam (CCW from the robot's x axis)
-  float radstep = 0.0f;       // [rad] angle between beams
-  Pose2 pose;                 // the line's x y theta (corrected pose in corrected logs)
-  Pose2 odom;                 // the line's odom_x odom_y odom_theta
+  Utime utime = 0;                // [us] from the chosen time stamp
+  std::vector<float> ranges;      // [m]
+  float rad0 = 0.0f;              // [rad] angle of the first beam (CCW from the robot's x axis)
+  float radstep = 0.0f;           // [rad] angle between beams
+  Pose2 pose;                     // the line's x y theta (corrected pose in corrected logs)
+  Pose2 odom;                     // the line's odom_x odom_y odom_theta
   double ipc_timestamp = 0.0;     // [s] as printed
   double logger_timestamp = 0.0;  // [s] as printed
   int64_t line = 0;               // 1-based line number in the file
 };
 
 struct CarmenOdom {
-  Utime utime = 0;  // [us]
-  Pose2 pose;       // odometry pose x y theta
-  double tv = 0.0;  // [m/s] translational velocity
-  double rv = 0.0;  // [rad/s] rotational velocity
+  Utime utime = 0;     // [us]
+  Pose2 pose;          // odometry pose x y theta
+  double tv = 0.0;     // [m/s] translational velocity
+  double rv = 0.0;     // [rad/s] rotational velocity
   double accel = 0.0;  // [m/s^2]
   int64_t line = 0;
 };
@@ -131,7 +131,7 @@ struct CarmenLog {
   };
   std::vector<Entry> order;
   std::map<std::string, int64_t> skipped_types;  // message type -> lines skipped
-  int64_t lines = 0;                              // lines read (including comments)
+  int64_t lines = 0;                             // lines read (including comments)
 };
 
 // CARMEN's beam spacing for an n-beam FLASER covering fov (radians): 0.5 deg for 361/360

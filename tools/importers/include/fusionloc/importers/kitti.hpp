@@ -38,8 +38,8 @@ namespace fl::importers {
 constexpr Utime kKittiOdometryEpochUtime = 1293840000LL * 1000000LL;
 
 struct KittiOptions {
-  int start_frame = 0;    // [frames] first frame to convert (0 = the first)
-  int max_frames = -1;    // [frames] at most this many frames (-1 = all)
+  int start_frame = 0;  // [frames] first frame to convert (0 = the first)
+  int max_frames = -1;  // [frames] at most this many frames (-1 = all)
   // Ground-truth pose file (12 numbers a line). "" = <folder>/poses_cam0_from_oxts.txt if it
   // exists, else (raw drives) computed from <folder>/oxts/, else none.
   std::string poses_file;
@@ -68,21 +68,21 @@ Eigen::Matrix3d RotationBaseCamera();
 
 // A rectified stereo pair's calibration as read from a KITTI folder.
 struct KittiCalibration {
-  int width = 0, height = 0;                  // [px]
-  double fx = 0, fy = 0, cx = 0, cy = 0;      // [px]
-  double baseline = 0;                        // [m]
+  int width = 0, height = 0;                                      // [px]
+  double fx = 0, fy = 0, cx = 0, cy = 0;                          // [px]
+  double baseline = 0;                                            // [m]
   Eigen::Vector3d left_center_in_cam0 = Eigen::Vector3d::Zero();  // [m] left optical centre
 };
 
 // One folder, scanned and checked, before any image is read.
 struct KittiSequence {
   std::string folder;
-  bool raw_layout = false;                 // true: raw drive, false: odometry sequence
-  std::vector<std::string> left_images;    // paths, in frame order
+  bool raw_layout = false;               // true: raw drive, false: odometry sequence
+  std::vector<std::string> left_images;  // paths, in frame order
   std::vector<std::string> right_images;
-  std::vector<Utime> utimes;               // [us] per frame (left camera)
+  std::vector<Utime> utimes;  // [us] per frame (left camera)
   KittiCalibration calibration;
-  std::string poses_path;                  // pose file or oxts folder used; "" if none
+  std::string poses_path;                           // pose file or oxts folder used; "" if none
   std::vector<Eigen::Isometry3d> T_cam0start_cam0;  // per frame, empty if no poses
 };
 

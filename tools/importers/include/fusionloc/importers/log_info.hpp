@@ -31,12 +31,12 @@ std::string LcmTypeName(int64_t fingerprint);
 
 struct ChannelInfo {
   std::string channel;
-  int64_t fingerprint = 0;   // of the channel's most common type
-  std::string type;          // its name (see LcmTypeName); "too short" if < 8 bytes
-  int64_t count = 0;         // [messages]
-  int64_t bytes = 0;         // [bytes] payload total
-  Utime first_utime = 0;     // [us] log time of the first message
-  Utime last_utime = 0;      // [us] log time of the last message
+  int64_t fingerprint = 0;       // of the channel's most common type
+  std::string type;              // its name (see LcmTypeName); "too short" if < 8 bytes
+  int64_t count = 0;             // [messages]
+  int64_t bytes = 0;             // [bytes] payload total
+  Utime first_utime = 0;         // [us] log time of the first message
+  Utime last_utime = 0;          // [us] log time of the last message
   int64_t decode_errors = 0;     // of a known type, but the bytes do not decode as it
   int64_t other_type_count = 0;  // messages with a different fingerprint than `type`
   int64_t time_backwards = 0;    // log time earlier than the channel's previous message
@@ -49,11 +49,11 @@ struct LogInfo {
   int64_t events = 0;
   Utime first_utime = 0;
   Utime last_utime = 0;
-  int64_t time_backwards = 0;          // events earlier than the event before (any channel)
-  int64_t corrupt_bytes_skipped = 0;   // reader: bytes skipped to resynchronise
-  bool truncated = false;              // reader: the last event is incomplete
-  std::string reader_problems;         // reader's own account ("" if none)
-  std::vector<ChannelInfo> channels;   // sorted by channel name
+  int64_t time_backwards = 0;         // events earlier than the event before (any channel)
+  int64_t corrupt_bytes_skipped = 0;  // reader: bytes skipped to resynchronise
+  bool truncated = false;             // reader: the last event is incomplete
+  std::string reader_problems;        // reader's own account ("" if none)
+  std::vector<ChannelInfo> channels;  // sorted by channel name
 
   bool has_problems() const;
   std::string ToText() const;  // aligned table for terminals
