@@ -17,11 +17,12 @@ void WriteTopView(const SimOptions& options, const std::string& png_path, double
   const Eigen::Vector4d b = w.Bounds();
   const double margin = 1.0;
   const int width = static_cast<int>((b[2] - b[0] + 2 * margin) * pixels_per_m);
-  const int height = static_cast<int>((b[3] - b[1] + 2 * margin) * pixels_per_m);
+  constexpr int kLegend = 45;  // [px] white band above the map for the legend
+  const int height = static_cast<int>((b[3] - b[1] + 2 * margin) * pixels_per_m) + kLegend;
   cv::Mat img(height, width, CV_8UC3, cv::Scalar(255, 255, 255));
   auto px = [&](const Eigen::Vector2d& p) {
     return cv::Point(static_cast<int>((p.x() - b[0] + margin) * pixels_per_m),
-                     static_cast<int>((b[3] + margin - p.y()) * pixels_per_m));
+                     static_cast<int>((b[3] + margin - p.y()) * pixels_per_m) + kLegend);
   };
   // 1 m grid.
   for (double x = std::floor(b[0]); x <= b[2]; x += 1.0) {
