@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -133,6 +134,38 @@ TEST(CarmenTest, RecoversCsailCorrectedTimestampsFromTheRawLog) {
   EXPECT_EQ(log.utimes.at(channels::kGroundTruth), t);
 }
 
+TEST(CarmenTest, RawCsailGetsGroundTruthFromTheCorrectedLog) {
+  const std::string raw = Laser("mit-csail.clf");
+  const std::string ref = Laser("csail-corrected.log.gz");
+  FL_REQUIRE_SHARED_FILE(raw);
+  FL_REQUIRE_SHARED_FILE(ref);
+  TempDir dir;
+  CarmenOptions opts;
+  opts.ground_truth_from = ref;
+  const ConvertSummary s = ConvertCarmen(opts, raw, dir.file("o.lcmlog"));
+  EXPECT_EQ(s.messages.at(channels::kLaser), 1988);
+  EXPECT_EQ(s.messages.at(channels::kGroundTruth), 406);
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  const auto& laser_t = log.utimes.at(channels::kLaser);
+  const auto& gt_t = log.utimes.at(channels::kGroundTruth);
+  EXPECT_EQ(gt_t[0], 1134864642914187);
+  for (const Utime t : gt_t) {
+    ASSERT_TRUE(std::binary_search(laser_t.begin(), laser_t.end(), t)) << t;
+  }
+  const CarmenLog corrected = ReadCarmenLog(ref);
+  const auto gt = log.Decode<bot_core::pose_t>(channels::kGroundTruth, 405);
+  EXPECT_DOUBLE_EQ(gt.pos[0], corrected.scans[405].pose.x);
+  EXPECT_DOUBLE_EQ(gt.pos[1], corrected.scans[405].pose.y);
+  // The raw log's own odometry is kept.
+  const auto odo = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, 0);
+  EXPECT_DOUBLE_EQ(odo.x, 576.536523);
+
+  // Not for a corrected input, and not together with timestamps_from.
+  EXPECT_THROW(ConvertCarmen(opts, ref, dir.file("p.lcmlog")), std::invalid_argument);
+  opts.timestamps_from = raw;
+  EXPECT_FALSE(opts.Validate().ok());
+}
+
 TEST(CarmenTest, UnmatchedScanInTimestampRecoveryIsAnError) {
   TempDir dir;
   fl::test::WriteText(dir.file("raw.clf"), fl::test::CarmenArcLog(5));
@@ -181,6 +214,14 @@ TEST(CarmenTest, RawLogKeepsOdomLinesInFileOrder) {
   EXPECT_DOUBLE_EQ(last.x, 2.0);
   EXPECT_EQ(last.utime, 10100000);
   EXPECT_NEAR(last.omega, 0.2 / 0.1, 1e-9);  // from consecutive scan odometry
+  EXPECT_TRUE(s.warnings.empty());
+
+  text += "ODOM 1.5 2.5 0.2 0.3 0.05 0 10.0 host 10.0\n";  // earlier than the scan before
+  fl::test::WriteText(dir.file("back.log"), text);
+  const ConvertSummary b =
+      ConvertCarmen(CarmenOptions{}, dir.file("back.log"), dir.file("b.lcmlog"));
+  ASSERT_EQ(b.warnings.size(), 1u);
+  EXPECT_NE(b.warnings[0].find("1 ODOM lines have a time stamp earlier"), std::string::npos);
 }
 
 TEST(CarmenTest, LoggerTimestampOption) {

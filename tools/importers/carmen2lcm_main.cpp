@@ -32,7 +32,7 @@ int main(int argc, char** argv) {
                       "LASER (planar_lidar_t), ODOMETRY (wheel_odometry_t) and, for corrected\n"
                       "logs, GROUND_TRUTH (pose_t, the corrected poses). Corrected logs get\n"
                       "seeded synthetic noisy odometry (see docs/IMPORTERS.md).");
-  std::string in, out, config, noisy, timestamp, timestamps_from;
+  std::string in, out, config, noisy, timestamp, timestamps_from, ground_truth_from;
   int64_t seed = -1;
   bool print_config = false;
   cli.AddPositional("IN", &in, "CARMEN log to read", /*required=*/false);
@@ -46,6 +46,9 @@ int main(int argc, char** argv) {
   cli.AddFlag("timestamps-from", &timestamps_from,
               "raw log of the same run: take each scan's time stamp from the raw scan with the "
               "same ranges (e.g. mit-csail.clf for csail-corrected.log.gz)");
+  cli.AddFlag("ground-truth-from", &ground_truth_from,
+              "raw logs: corrected log of the same run; its poses go to GROUND_TRUTH for the "
+              "raw scans with the same ranges (e.g. csail-corrected.log.gz for mit-csail.clf)");
   cli.AddFlag("print-config", &print_config, "print the options as YAML and exit");
   cli.AddEpilog(
       "\nExamples:\n"
@@ -53,6 +56,8 @@ int main(int argc, char** argv) {
       "  fl-carmen2lcm ../shared/data/laser/intel-corrected.log.gz intel.lcmlog --seed 7\n"
       "  fl-carmen2lcm ../shared/data/laser/csail-corrected.log.gz csail.lcmlog \\\n"
       "      --timestamps-from ../shared/data/laser/mit-csail.clf\n"
+      "  fl-carmen2lcm ../shared/data/laser/mit-csail.clf csail-raw.lcmlog \\\n"
+      "      --ground-truth-from ../shared/data/laser/csail-corrected.log.gz\n"
       "Exit status: 0 done, 1 conversion failed (nothing written), 2 usage error.\n");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
   try {
@@ -62,6 +67,7 @@ int main(int argc, char** argv) {
     if (seed >= 0) options.seed = static_cast<uint64_t>(seed);
     if (!timestamp.empty()) options.timestamp = timestamp;
     if (!timestamps_from.empty()) options.timestamps_from = timestamps_from;
+    if (!ground_truth_from.empty()) options.ground_truth_from = ground_truth_from;
     const fl::Status valid = options.Validate();
     if (!valid.ok()) {
       std::cerr << "fl-carmen2lcm: invalid options: " << valid.message() << "\n";

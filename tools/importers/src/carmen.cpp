@@ -178,6 +178,11 @@ Status CarmenOptions::Validate() const {
   if (timestamp != "ipc" && timestamp != "logger") {
     return Status::Error("timestamp = '" + timestamp + "' must be 'ipc' or 'logger'");
   }
+  if (!timestamps_from.empty() && !ground_truth_from.empty()) {
+    return Status::Error(
+        "timestamps_from (for a corrected log) and ground_truth_from (for a raw log) cannot be "
+        "used together");
+  }
   if (!(range_match_tolerance > 0.0) || !std::isfinite(range_match_tolerance)) {
     return Status::Error("range_match_tolerance must be > 0 m");
   }
@@ -328,36 +333,42 @@ std::vector<Pose2> SynthesizeNoisyOdometry(const CarmenNoiseModel& noise, uint64
   return out;
 }
 
-void RecoverTimestampsByRanges(const CarmenLog& raw, double tolerance, CarmenLog* log) {
-  size_t next = 0;  // raw scans before `next` are used up (matches are in order)
-  for (CarmenScan& s : log->scans) {
+std::vector<size_t> MatchScansByRanges(const CarmenLog& superset, const CarmenLog& subset,
+                                       double tolerance, const std::string& hint) {
+  std::vector<size_t> match;
+  match.reserve(subset.scans.size());
+  size_t next = 0;  // superset scans before `next` are used up (matches are in order)
+  for (const CarmenScan& s : subset.scans) {
     bool found = false;
-    for (size_t j = next; j < raw.scans.size(); ++j) {
-      const CarmenScan& r = raw.scans[j];
+    for (size_t j = next; j < superset.scans.size() && !found; ++j) {
+      const CarmenScan& r = superset.scans[j];
       if (r.ranges.size() != s.ranges.size()) continue;
       bool same = true;
-      for (size_t i = 0; i < r.ranges.size(); ++i) {
-        if (std::abs(r.ranges[i] - s.ranges[i]) > tolerance) {
-          same = false;
-          break;
-        }
+      for (size_t i = 0; i < r.ranges.size() && same; ++i) {
+        same = std::abs(r.ranges[i] - s.ranges[i]) <= tolerance;
       }
       if (same) {
-        s.utime = r.utime;
+        match.push_back(j);
         next = j + 1;
         found = true;
-        break;
       }
     }
     if (!found) {
       throw std::runtime_error(
-          log->path + ":" + std::to_string(s.line) + ": no scan of '" + raw.path + "' after line " +
-          std::to_string(next > 0 ? raw.scans[next - 1].line : 0) +
-          " has the same ranges (within " + std::to_string(tolerance) +
-          " m), so its time stamp cannot be recovered; is the raw log of the same run? "
-          "(omit --timestamps-from to keep the log's own time stamps)");
+          subset.path + ":" + std::to_string(s.line) + ": no scan of '" + superset.path +
+          "' after line " + std::to_string(next > 0 ? superset.scans[next - 1].line : 0) +
+          " has the same ranges (within " + std::to_string(tolerance) + " m); " + hint);
     }
   }
+  return match;
+}
+
+void RecoverTimestampsByRanges(const CarmenLog& raw, double tolerance, CarmenLog* log) {
+  const std::vector<size_t> match = MatchScansByRanges(
+      raw, *log, tolerance,
+      "its time stamp cannot be recovered: is the raw log of the same run? (omit "
+      "--timestamps-from to keep the log's own time stamps)");
+  for (size_t k = 0; k < match.size(); ++k) log->scans[k].utime = raw.scans[match[k]].utime;
   // ODOM lines cannot be matched; they keep their own stamps (only used for raw logs).
 }
 
@@ -384,6 +395,30 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
                                " scans matched)");
   }
   const bool corrected = IsCorrectedCarmenLog(options, in);
+
+  // Raw log with a corrected log of the same run: reference poses for the matched scans.
+  std::vector<bool> has_reference(log.scans.size(), false);
+  std::vector<Pose2> reference(log.scans.size());
+  if (!options.ground_truth_from.empty()) {
+    if (corrected) {
+      throw std::invalid_argument(
+          "ground_truth_from is for raw logs, but '" + in +
+          "' is treated as corrected (its own poses are the ground truth); drop "
+          "--ground-truth-from or set --noisy-odometry false");
+    }
+    const CarmenLog ref =
+        ReadCarmenLog(options.ground_truth_from, options.timestamp, options.fov_deg);
+    const std::vector<size_t> match = MatchScansByRanges(
+        log, ref, options.range_match_tolerance,
+        "it has no partner in the raw log: is the corrected log of the same run?");
+    for (size_t k = 0; k < match.size(); ++k) {
+      has_reference[match[k]] = true;
+      reference[match[k]] = ref.scans[k].pose;
+    }
+    summary.warnings.push_back("GROUND_TRUTH for " + std::to_string(match.size()) + " of " +
+                               std::to_string(log.scans.size()) + " scans from '" +
+                               options.ground_truth_from + "' (matched by ranges)");
+  }
 
   // Odometry per scan: the line's own (raw) or synthetic noisy (corrected).
   std::vector<Pose2> scan_odom;
@@ -426,6 +461,23 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
     summary.warnings.push_back(
         "ignored " + std::to_string(log.odom.size()) +
         " ODOM lines: corrected log, ODOMETRY carries seeded synthetic odometry instead");
+  }
+
+  if (!corrected) {
+    int64_t odom_backwards = 0;
+    Utime prev_t = 0;
+    bool first = true;
+    for (const CarmenLog::Entry& e : log.order) {
+      const Utime t = e.is_scan ? log.scans[e.index].utime : log.odom[e.index].utime;
+      if (!e.is_scan && !first && t < prev_t) ++odom_backwards;
+      prev_t = t;
+      first = false;
+    }
+    if (odom_backwards > 0) {
+      summary.warnings.push_back(std::to_string(odom_backwards) +
+                                 " ODOM lines have a time stamp earlier than the line before; "
+                                 "kept in file order");
+    }
   }
 
   LcmLogWriter writer(out_log);
@@ -482,6 +534,9 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
       write(channels::kLaser, scan, s.utime);
 
       if (corrected) write(channels::kGroundTruth, MakePose(s.utime, s.pose), s.utime);
+      if (has_reference[e.index]) {
+        write(channels::kGroundTruth, MakePose(s.utime, reference[e.index]), s.utime);
+      }
     }
     writer.Close();
   } catch (...) {

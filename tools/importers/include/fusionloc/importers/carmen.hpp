@@ -14,7 +14,8 @@
 //                 0.25 deg for 401/400 beams, else fov/(n-1).
 //   ODOMETRY      fusionloc.wheel_odometry_t, one per FLASER line (its odometry fields) and one
 //                 per ODOM line, in file order. For corrected logs: synthetic noisy odometry.
-//   GROUND_TRUTH  bot_core.pose_t, corrected logs only: the FLASER line's (corrected) pose.
+//   GROUND_TRUTH  bot_core.pose_t, corrected logs: the FLASER line's (corrected) pose; raw logs
+//                 with ground_truth_from: the matched corrected scans' poses.
 // Times: utime = round(ipc_timestamp * 1e6) (or logger_timestamp, see CarmenOptions).
 #pragma once
 
@@ -83,6 +84,12 @@ struct CarmenOptions {
   // (within range_match_tolerance) and takes that scan's time stamp. A scan without a match is
   // an error.
   std::string timestamps_from;
+  // Optional, for a raw log: a corrected log of the same run whose scans are a subset of this
+  // log's (e.g. csail-corrected.log.gz for mit-csail.clf). Each of its scans is matched, in
+  // order, to the raw scan with identical ranges, and its corrected pose is written to
+  // GROUND_TRUTH with that raw scan's utime (so only the matched scans have a reference). A
+  // corrected scan without a match is an error. Not with timestamps_from.
+  std::string ground_truth_from;
   double range_match_tolerance = 0.006;  // [m] max per-beam difference for a match
   double fov_deg = 180.0;                // [deg] field of view of FLASER scans (CARMEN: 180)
 
@@ -93,6 +100,7 @@ struct CarmenOptions {
     a->Visit("noise", &noise);
     a->Visit("timestamp", &timestamp);
     a->Visit("timestamps_from", &timestamps_from);
+    a->Visit("ground_truth_from", &ground_truth_from);
     a->Visit("range_match_tolerance", &range_match_tolerance);
     a->Visit("fov_deg", &fov_deg);
   }
@@ -151,6 +159,12 @@ bool IsCorrectedCarmenLog(const CarmenOptions& options, const std::string& path)
 // The noisy odometry poses, one per scan, for a corrected log (see CarmenNoiseModel).
 std::vector<Pose2> SynthesizeNoisyOdometry(const CarmenNoiseModel& noise, uint64_t seed,
                                            const std::vector<Pose2>& corrected_poses);
+
+// For each scan of `subset`, the index of the scan of `superset` with the same ranges (each
+// beam within `tolerance`), searched forward in order. Throws naming the first unmatched
+// scan's FILE:LINE, followed by `hint`.
+std::vector<size_t> MatchScansByRanges(const CarmenLog& superset, const CarmenLog& subset,
+                                       double tolerance, const std::string& hint);
 
 // Replaces each scan's utime with the utime of the matching scan in `raw` (see
 // CarmenOptions::timestamps_from). Throws naming the first unmatched scan's line.
