@@ -11,6 +11,7 @@
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/trajectory_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 #include "test_paths.hpp"
 
 namespace fl::eval {
@@ -152,6 +153,12 @@ TEST(EvalReadLcm, PoseFusedAndTrajectoryChannels) {
       f.theta = -0.1 * i;
       w.Write("FUSED_POSE", f, p.utime + 100);
 
+      fusionloc::wheel_odometry_t o{};
+      o.utime = p.utime;
+      o.x = 2.0 * i;
+      o.theta = 0.05;
+      w.Write("ODOMETRY", o, p.utime);
+
       bot_core::planar_lidar_t scan{};
       scan.utime = p.utime;
       w.Write("LASER", scan, p.utime);
@@ -182,6 +189,11 @@ TEST(EvalReadLcm, PoseFusedAndTrajectoryChannels) {
   ASSERT_EQ(fused.size(), 5u);
   EXPECT_NEAR(fused[2].T_world_base.translation().x(), 2.5, 1e-12);
   EXPECT_NEAR(Yaw(fused[2].T_world_base), -0.2, 1e-12);
+
+  const Trajectory odom = ReadTrajectoryLcm(log, "ODOMETRY");
+  ASSERT_EQ(odom.size(), 5u);
+  EXPECT_NEAR(odom[4].T_world_base.translation().x(), 8.0, 1e-12);
+  EXPECT_NEAR(Yaw(odom[4].T_world_base), 0.05, 1e-12);
 
   const Trajectory traj = ReadTrajectoryLcm(log, "FUSED_TRAJECTORY");
   ASSERT_EQ(traj.size(), 6u);

@@ -276,7 +276,8 @@ int main(int argc, char** argv) {
   cli.AddPositional("EST", &a.est_path, "estimated trajectory: LCM log or text file");
   cli.AddPositional("REF", &a.ref_path, "reference trajectory: LCM log or text file");
   cli.AddFlag("est-channel", &a.est_channel,
-              "pose channel when EST is an LCM log (bot_core.pose_t, fusionloc.fused_pose_t, or "
+              "pose channel when EST is an LCM log (bot_core.pose_t, fusionloc.fused_pose_t, "
+              "fusionloc.wheel_odometry_t, or "
               "fusionloc.trajectory_t = its last message), e.g. FUSED_POSE, RBPF_TRAJECTORY");
   cli.AddFlag("ref-channel", &a.ref_channel, "pose channel when REF is an LCM log");
   cli.AddFlag("format", &a.format, "text format of both files: auto, tum, kitti, 2d");

@@ -19,6 +19,7 @@
 #include "fusionloc/common/log.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/trajectory_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 #include "text_parse.hpp"
 
 namespace fl::eval {
@@ -234,6 +235,7 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
   const int64_t kPoseHash = bot_core::pose_t::getHash();
   const int64_t kFusedHash = fusionloc::fused_pose_t::getHash();
   const int64_t kTrajHash = fusionloc::trajectory_t::getHash();
+  const int64_t kOdomHash = fusionloc::wheel_odometry_t::getHash();
 
   std::map<std::string, int64_t> channel_counts;
   std::vector<StampedPose> poses;
@@ -252,13 +254,14 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
     }
     int64_t hash = 0;
     for (int k = 0; k < 8; ++k) hash = static_cast<int64_t>((static_cast<uint64_t>(hash) << 8) | ev.data[k]);
-    if (hash != kPoseHash && hash != kFusedHash && hash != kTrajHash) {
+    if (hash != kPoseHash && hash != kFusedHash && hash != kTrajHash && hash != kOdomHash) {
       std::ostringstream h;
       h << std::hex << static_cast<uint64_t>(hash);
       throw EvalError("channel '" + channel + "' in '" + log_path +
                       "' carries a message type with fingerprint 0x" + h.str() +
                       ", not a pose type; use a channel of type bot_core.pose_t, "
-                      "fusionloc.fused_pose_t or fusionloc.trajectory_t");
+                      "fusionloc.fused_pose_t, fusionloc.wheel_odometry_t or "
+                      "fusionloc.trajectory_t");
     }
     if (kind != 0 && hash != kind) {
       throw EvalError("channel '" + channel + "' in '" + log_path +
@@ -281,6 +284,19 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
       if (!(qn > 1e-6)) {
         throw EvalError("channel '" + channel + "' in '" + log_path + "': pose at utime " +
                         std::to_string(msg.utime) + " has a zero or NaN orientation quaternion");
+      }
+      poses.push_back(p);
+    } else if (hash == kOdomHash) {
+      fusionloc::wheel_odometry_t msg{};
+      if (msg.decode(ev.data.data(), 0, size) != size) {
+        ++decode_failures;
+        continue;
+      }
+      StampedPose p;
+      p.utime = msg.utime;
+      p.T_world_base = Pose2(msg.x, msg.y, msg.theta).ToIsometry3();
+      if (!std::isfinite(msg.x) || !std::isfinite(msg.y) || !std::isfinite(msg.theta)) {
+        p.T_world_base.translation().setConstant(std::nan(""));
       }
       poses.push_back(p);
     } else if (hash == kFusedHash) {

@@ -58,6 +58,7 @@ Trajectory ReadTrajectoryText(const std::string& path, const std::string& format
 // Reads poses from an LCM log. The channel's type is detected by fingerprint:
 //   bot_core.pose_t          a stream of poses (utime = the message's time of validity)
 //   fusionloc.fused_pose_t   a stream of planar poses
+//   fusionloc.wheel_odometry_t  a stream of integrated odometry poses (odometry baseline)
 //   fusionloc.trajectory_t   the LAST message on the channel (the final optimised trajectory)
 // Streams are sorted by utime; a repeated utime keeps the latest message (counted, warned).
 Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& channel);
