@@ -1,0 +1,122 @@
+// The only translation unit of fl_fusion that includes PCL (slow to compile).
+#include "fusionloc/fusion/point_map.hpp"
+
+#include <pcl/filters/voxel_grid.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <cmath>
+#include <map>
+
+namespace fl::fusion {
+namespace {
+
+// VoxelGrid indexes voxels with 32-bit integers: split big clouds into tiles whose voxel
+// count fits, filter each tile, and concatenate (voxels never straddle tiles: tiles are
+// aligned to the voxel grid).
+pcl::PointCloud<pcl::PointXYZ>::Ptr VoxelFilter(const pcl::PointCloud<pcl::PointXYZ>::Ptr& in,
+                                                double voxel) {
+  auto out = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  if (in->empty()) return out;
+  const double tile = voxel * 1000.0;  // 1000^3 voxels < 2^31
+  std::map<std::tuple<int64_t, int64_t, int64_t>, pcl::PointCloud<pcl::PointXYZ>::Ptr> tiles;
+  for (const auto& p : in->points) {
+    const auto key = std::make_tuple(static_cast<int64_t>(std::floor(p.x / tile)),
+                                     static_cast<int64_t>(std::floor(p.y / tile)),
+                                     static_cast<int64_t>(std::floor(p.z / tile)));
+    auto& cloud = tiles[key];
+    if (!cloud) cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+    cloud->points.push_back(p);
+  }
+  pcl::VoxelGrid<pcl::PointXYZ> grid;
+  grid.setLeafSize(static_cast<float>(voxel), static_cast<float>(voxel),
+                   static_cast<float>(voxel));
+  for (auto& [key, cloud] : tiles) {
+    cloud->width = static_cast<uint32_t>(cloud->points.size());
+    cloud->height = 1;
+    cloud->is_dense = true;
+    pcl::PointCloud<pcl::PointXYZ> filtered;
+    grid.setInputCloud(cloud);
+    grid.filter(filtered);
+    *out += filtered;
+  }
+  return out;
+}
+
+}  // namespace
+
+struct PointMap::Impl {
+  std::map<Utime, pcl::PointCloud<pcl::PointXYZ>::Ptr> keyframes;  // base frame
+  int64_t points = 0;
+};
+
+Status PointMapOptions::Validate() const {
+  if (!(voxel_size_m >= 0.005 && voxel_size_m <= 10.0)) {
+    return Status::Error("voxel_size_m must be in [0.005, 10] m");
+  }
+  if (!(max_range_m > 0.0)) return Status::Error("max_range_m must be > 0");
+  if (max_points < 1) return Status::Error("max_points must be >= 1");
+  return Status::Ok();
+}
+
+PointMap::PointMap(const PointMapOptions& options) : impl_(new Impl), options_(options) {
+  const Status s = options_.Validate();
+  if (!s.ok()) throw std::invalid_argument("PointMapOptions: " + s.message());
+}
+
+PointMap::~PointMap() = default;
+
+Status PointMap::AddKeyframe(Utime utime, const std::vector<Eigen::Vector3f>& points_base) {
+  if (impl_->keyframes.count(utime)) {
+    return Status::Error("point map: a keyframe at utime " + std::to_string(utime) +
+                         " is already stored; duplicate dropped");
+  }
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  cloud->points.reserve(points_base.size());
+  const float max_range = static_cast<float>(options_.max_range_m);
+  for (const Eigen::Vector3f& p : points_base) {
+    if (!p.allFinite() || p.norm() > max_range) {
+      ++dropped_points_;
+      continue;
+    }
+    cloud->points.emplace_back(p.x(), p.y(), p.z());
+  }
+  cloud->width = static_cast<uint32_t>(cloud->points.size());
+  cloud->height = 1;
+  auto filtered = VoxelFilter(cloud, options_.voxel_size_m);
+  impl_->points += static_cast<int64_t>(filtered->size());
+  impl_->keyframes[utime] = filtered;
+  return Status::Ok();
+}
+
+std::vector<Eigen::Vector3f> PointMap::Build(const std::function<bool(Utime, Pose2*)>& pose_at,
+                                             int* skipped) const {
+  if (skipped) *skipped = 0;
+  auto all = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  all->points.reserve(static_cast<size_t>(std::min<int64_t>(impl_->points, options_.max_points)));
+  for (const auto& [utime, cloud] : impl_->keyframes) {
+    Pose2 T_map_base;
+    if (!pose_at(utime, &T_map_base)) {
+      if (skipped) ++*skipped;
+      continue;
+    }
+    const Eigen::Isometry3f T = T_map_base.ToIsometry3().cast<float>();
+    for (const auto& p : cloud->points) {
+      if (static_cast<int64_t>(all->points.size()) >= options_.max_points) break;
+      const Eigen::Vector3f q = T * Eigen::Vector3f(p.x, p.y, p.z);
+      all->points.emplace_back(q.x(), q.y(), q.z());
+    }
+  }
+  all->width = static_cast<uint32_t>(all->points.size());
+  all->height = 1;
+  const auto filtered = VoxelFilter(all, options_.voxel_size_m);
+  std::vector<Eigen::Vector3f> out;
+  out.reserve(filtered->size());
+  for (const auto& p : filtered->points) out.emplace_back(p.x, p.y, p.z);
+  return out;
+}
+
+int PointMap::num_keyframes() const { return static_cast<int>(impl_->keyframes.size()); }
+int64_t PointMap::stored_points() const { return impl_->points; }
+
+}  // namespace fl::fusion
