@@ -8,6 +8,7 @@
 #include <map>
 
 #include "fusionloc/common/lcm_interface.hpp"
+#include "sim_fixtures.hpp"
 #include "test_paths.hpp"
 
 namespace fl::sim {
@@ -131,11 +132,16 @@ std::vector<SimFrame> Drive(SimOptions o, double duration_s) {
   o.duration_s = duration_s;
   o.laser.enabled = false;
   o.camera.enabled = false;
-  Simulator sim(o);
-  std::vector<SimFrame> frames;
-  SimFrame f;
-  while (sim.Step(&f)) frames.push_back(f);
-  return frames;
+  return test::Simulate(o);
+}
+
+TEST(SimulatorTest, FixtureHelperGivesTheRequestedSensors) {
+  const auto frames = test::Simulate("corridor", 1.0, 4, /*laser=*/true, /*camera=*/false);
+  ASSERT_EQ(frames.size(), 11u);
+  for (const SimFrame& f : frames) {
+    EXPECT_TRUE(f.laser.has_value());
+    EXPECT_FALSE(f.stereo.has_value());
+  }
 }
 
 TEST(SimulatorTest, OdometryNoiseMatchesTheDocumentedModel) {

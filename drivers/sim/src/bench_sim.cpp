@@ -252,10 +252,10 @@ int main(int argc, char** argv) {
                       "levels (the calibration of camera.pixel_noise_sigma).");
   fl::bench::CommonArgs args;
   fl::bench::AddCommonFlags(&cli, &args, "sim");
-  std::string worlds = "paper,corridor", sigmas = "0,1,2,3,4,6,8";
+  std::string worlds = "paper,corridor", sigmas = "0,3,6,8,10";
   std::string tmp = std::filesystem::temp_directory_path().string();
   double duration = -1;
-  int frames = 20;
+  int frames = 60;
   cli.AddFlag("worlds", &worlds, "comma-separated worlds whose logs are timed ('' = none)");
   cli.AddFlag("duration", &duration, "simulated seconds per log (-1 = the world's default)");
   cli.AddFlag("sigmas", &sigmas, "comma-separated pixel-noise sigmas to calibrate ('' = none)");

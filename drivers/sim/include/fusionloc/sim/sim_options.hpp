@@ -126,7 +126,7 @@ struct CameraOptions {
   double x_m = 0.2;            // [m] left camera position in the base frame
   double y_m = 0.06;           // [m]
   double z_m = 0.5;            // [m]
-  double pixel_noise_sigma = 3.0;  // [gray levels] Gaussian intensity noise (see SIMULATOR.md)
+  double pixel_noise_sigma = 8.0;  // [gray levels] Gaussian intensity noise (calibrated: SIMULATOR.md)
   int supersampling = 2;       // [-] n x n rays per pixel (anti-aliasing; 1 = one ray)
 
   template <class A>
