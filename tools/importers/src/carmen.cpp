@@ -390,7 +390,7 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
     const CarmenLog raw =
         ReadCarmenLog(options.timestamps_from, options.timestamp, options.fov_deg);
     RecoverTimestampsByRanges(raw, options.range_match_tolerance, &log);
-    summary.warnings.push_back("scan time stamps taken from '" + options.timestamps_from +
+    summary.notes.push_back("scan time stamps taken from '" + options.timestamps_from +
                                "' by matching ranges (" + std::to_string(log.scans.size()) +
                                " scans matched)");
   }
@@ -415,7 +415,7 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
       has_reference[match[k]] = true;
       reference[match[k]] = ref.scans[k].pose;
     }
-    summary.warnings.push_back("GROUND_TRUTH for " + std::to_string(match.size()) + " of " +
+    summary.notes.push_back("GROUND_TRUTH for " + std::to_string(match.size()) + " of " +
                                std::to_string(log.scans.size()) + " scans from '" +
                                options.ground_truth_from + "' (matched by ranges)");
   }
@@ -454,11 +454,11 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
                                " scans share the time stamp of the scan before; kept" + hint);
   }
   for (const auto& [type, count] : log.skipped_types) {
-    summary.warnings.push_back("skipped " + std::to_string(count) + " '" + type +
+    summary.notes.push_back("skipped " + std::to_string(count) + " '" + type +
                                "' lines (not converted)");
   }
   if (corrected && !log.odom.empty()) {
-    summary.warnings.push_back(
+    summary.notes.push_back(
         "ignored " + std::to_string(log.odom.size()) +
         " ODOM lines: corrected log, ODOMETRY carries seeded synthetic odometry instead");
   }

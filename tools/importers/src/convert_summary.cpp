@@ -12,6 +12,7 @@ std::string ConvertSummary::ToString() const {
   }
   ss << "\n";
   for (const auto& [channel, count] : messages) ss << "  " << channel << ": " << count << "\n";
+  for (const auto& n : notes) ss << "  note: " << n << "\n";
   for (const auto& w : warnings) ss << "  warning: " << w << "\n";
   return ss.str();
 }

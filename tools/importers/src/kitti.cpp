@@ -574,7 +574,7 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
   if (seq.T_cam0start_cam0.empty()) {
     summary.warnings.push_back("no ground truth: GROUND_TRUTH not written");
   } else if (fs::path(seq.poses_path).filename() == "oxts") {
-    summary.warnings.push_back("ground truth computed from " + seq.poses_path +
+    summary.notes.push_back("ground truth computed from " + seq.poses_path +
                                " (KITTI devkit OXTS-to-pose method; no pose file given)");
   }
 

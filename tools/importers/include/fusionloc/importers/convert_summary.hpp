@@ -20,6 +20,9 @@ struct ConvertSummary {
   // Problems that did not stop the conversion but change what the output means (e.g. time
   // going backwards, skipped message types). Each is one complete sentence.
   std::vector<std::string> warnings;
+  // What the importer did that a user may want to know (skipped message types, where the
+  // ground truth or time stamps came from). One sentence each.
+  std::vector<std::string> notes;
   // Multi-line human-readable account (counts, span, warnings), for programs to print.
   std::string ToString() const;
 };
