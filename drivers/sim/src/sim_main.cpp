@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cstdio>
 #include <exception>
+#include <stdexcept>
 #include <thread>
 
 #include "fusionloc/common/command_line.hpp"
@@ -58,10 +59,13 @@ int RunLive(const fl::sim::SimOptions& options, const std::string& url, double r
 }
 
 int RunLog(const fl::sim::SimOptions& options, const std::string& path) {
+  fl::InstallShutdownHandlers();
   const auto start = std::chrono::steady_clock::now();
   auto last = start;
   const fl::sim::LogStats stats =
       fl::sim::WriteLog(options, path, [&](int64_t done, int64_t total) {
+        // WriteLog deletes the partial output when this throws.
+        if (fl::ShutdownRequested()) throw std::runtime_error("interrupted; no log written");
         const auto now = std::chrono::steady_clock::now();
         if (now - last < std::chrono::seconds(2) && done != total) return;
         last = now;
