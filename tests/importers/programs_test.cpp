@@ -94,6 +94,10 @@ TEST(ImporterProgramsTest, KittiAndLogInfo) {
   EXPECT_NE(cut.out.find("truncated"), std::string::npos) << cut.out;
   EXPECT_EQ(RunProgram(dir, "fl-log-info cut.lcmlog").status, 0);
   EXPECT_EQ(RunProgram(dir, "fl-log-info missing.lcmlog").status, 1);
+  fl::test::WriteText(dir.file("text.log"), "FLASER 1 2 3\n");
+  const Result text = RunProgram(dir, "fl-log-info text.log");
+  EXPECT_EQ(text.status, 1);
+  EXPECT_NE(text.err.find("not an LCM log"), std::string::npos) << text.err;
   EXPECT_EQ(RunProgram(dir, "fl-log-info").status, 2);
 }
 

@@ -24,7 +24,8 @@ int main(int argc, char** argv) {
   cli.AddEpilog(
       "\nExample:\n"
       "  fl-log-info kitti0001.lcmlog\n"
-      "Exit status: 0 read (problems are listed), 1 cannot read, 2 usage error,\n"
+      "Exit status: 0 read (problems are listed), 1 cannot read or not an LCM log,\n"
+      "2 usage error, "
       "3 problems found (with --strict).\n");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
   if (types) {
@@ -41,6 +42,12 @@ int main(int argc, char** argv) {
   try {
     const fl::importers::LogInfo info = fl::importers::InspectLcmLog(path);
     std::cout << (json ? info.ToJson() : info.ToText());
+    if (info.events == 0 && info.file_bytes > 0) {
+      std::cerr << "fl-log-info: error: " << path
+                << ": no LCM event found: not an LCM log (convert it first, e.g. with "
+                   "fl-carmen2lcm or fl-kitti2lcm)\n";
+      return 1;
+    }
     return (strict && info.has_problems()) ? 3 : 0;
   } catch (const std::exception& e) {
     std::cerr << "fl-log-info: error: " << e.what() << "\n";

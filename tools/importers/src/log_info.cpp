@@ -106,6 +106,7 @@ double ChannelInfo::rate_hz() const {
 
 bool LogInfo::has_problems() const {
   if (corrupt_bytes_skipped > 0 || truncated || time_backwards > 0) return true;
+  if (events == 0 && file_bytes > 0) return true;  // not an LCM log
   for (const auto& c : channels) {
     if (c.decode_errors > 0 || c.other_type_count > 0 || c.time_backwards > 0) return true;
   }
@@ -184,6 +185,7 @@ std::string LogInfo::ToText() const {
   std::ostringstream ss;
   ss << "log: " << path << " (" << Bytes(file_bytes) << ", " << events << " events, "
      << channels.size() << " channels)\n";
+  if (events == 0) ss << "no events\n";
   if (events > 0) {
     ss << "time: " << TimeText(first_utime) << " .. " << TimeText(last_utime) << " (span "
        << std::fixed << std::setprecision(3) << UtimeToSeconds(last_utime - first_utime) << " s)\n";
@@ -193,11 +195,13 @@ std::string LogInfo::ToText() const {
     wc = std::max(wc, c.channel.size());
     wt = std::max(wt, c.type.size());
   }
-  ss << std::left << std::setw(static_cast<int>(wc)) << "CHANNEL"
-     << "  " << std::setw(static_cast<int>(wt)) << "TYPE" << std::right << std::setw(9) << "COUNT"
-     << std::setw(10) << "RATE_HZ" << std::setw(12) << "BYTES" << std::setw(11) << "FIRST_S"
-     << std::setw(11) << "LAST_S" << std::setw(9) << "DEC_ERR" << std::setw(9) << "BACKWD"
-     << "\n";
+  if (!channels.empty()) {
+    ss << std::left << std::setw(static_cast<int>(wc)) << "CHANNEL"
+       << "  " << std::setw(static_cast<int>(wt)) << "TYPE" << std::right << std::setw(9) << "COUNT"
+       << std::setw(10) << "RATE_HZ" << std::setw(12) << "BYTES" << std::setw(11) << "FIRST_S"
+       << std::setw(11) << "LAST_S" << std::setw(9) << "DEC_ERR" << std::setw(9) << "BACKWD"
+       << "\n";
+  }
   for (const auto& c : channels) {
     ss << std::left << std::setw(static_cast<int>(wc)) << c.channel << "  "
        << std::setw(static_cast<int>(wt)) << c.type << std::right << std::setw(9) << c.count
@@ -213,6 +217,10 @@ std::string LogInfo::ToText() const {
     any = true;
     ss << "  " << text << "\n";
   };
+  if (events == 0 && file_bytes > 0) {
+    problem("no LCM event found in " + std::to_string(file_bytes) +
+            " bytes: this is not an LCM log (or it is corrupt from the start)");
+  }
   if (!reader_problems.empty()) problem(reader_problems);
   if (time_backwards > 0) {
     problem(std::to_string(time_backwards) + " events are earlier than the event before");
