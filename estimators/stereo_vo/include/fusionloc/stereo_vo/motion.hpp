@@ -1,0 +1,145 @@
+// Motion from stereo correspondences: the closed-form 3D-3D solution (Arun et al. 1987 /
+// Umeyama 1991, MSIF eqs. 16-18), RANSAC over it, and the nonlinear refinement of the stereo
+// reprojection error with its covariance.
+//
+// Frames: camera optical frame (x right, y down, z forward) of the LEFT camera; the right
+// camera is at +baseline along x. T_a_b is the pose of frame b in frame a (p_a = T_a_b p_b).
+// In frame-to-frame use, a = camera at time t ("previous"), b = camera at time t+1 ("current").
+//
+// Perturbation convention for covariances: T = T_hat * Exp(delta), delta = [rho; phi] with rho
+// the translation part and phi the rotation vector (right perturbation, translation first), the
+// order of fusionloc.relative_pose_factor_t's information matrix [dx dy dz droll dpitch dyaw].
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+namespace fl::vo {
+
+// Pinhole model of a rectified stereo pair (both cameras share fx, fy, cx, cy).
+struct StereoCamera {
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  double baseline = 0;  // [m] right camera is at +baseline along the left camera's x axis
+
+  // Projects a point in the left camera frame to (u_left, v, u_right) [px]; false if z <= 0.
+  bool Project(const Eigen::Vector3d& p_camera, Eigen::Vector3d* uvu) const {
+    if (p_camera.z() <= 1e-9) return false;
+    const double inv_z = 1.0 / p_camera.z();
+    (*uvu)(0) = fx * p_camera.x() * inv_z + cx;
+    (*uvu)(1) = fy * p_camera.y() * inv_z + cy;
+    (*uvu)(2) = fx * (p_camera.x() - baseline) * inv_z + cx;
+    return true;
+  }
+  // Triangulates from the left pixel (u, v) and the disparity d = u_left - u_right > 0 [px].
+  Eigen::Vector3d Triangulate(double u, double v, double disparity) const {
+    const double z = fx * baseline / disparity;
+    return {(u - cx) * z / fx, (v - cy) * z / fy, z};
+  }
+};
+
+// One correspondence of the quadrilateral matching: the same scene point seen by the stereo
+// pair at time a (previous) and at time b (current). Observations are (u_left, v_left, u_right).
+struct StereoCorrespondence {
+  Eigen::Vector3d obs_a;  // [px] at time a
+  Eigen::Vector3d obs_b;  // [px] at time b
+  Eigen::Vector3d p_a;    // [m] triangulated at time a, camera a frame
+  Eigen::Vector3d p_b;    // [m] triangulated at time b, camera b frame
+};
+
+// Closed-form rigid transform T with p_a ~= T * p_b minimizing sum |p_a - T p_b|^2 (Arun's SVD
+// with Umeyama's reflection fix). `idx` selects the correspondences (all if empty). Returns false
+// if fewer than 3 points or a degenerate (collinear) configuration.
+bool SolveRigidSvd(const std::vector<Eigen::Vector3d>& p_a, const std::vector<Eigen::Vector3d>& p_b,
+                   const std::vector<int>& idx, Eigen::Isometry3d* T_a_b);
+
+struct RansacOptions {
+  int max_iterations = 300;            // upper bound on random minimal samples
+  double confidence = 0.995;           // [-] stop when an all-inlier sample is this likely
+  double inlier_threshold_px = 2.0;    // [px] max reprojection error (left u, v, right u) at b
+  int min_inliers = 12;                // fewer inliers: no motion
+  int seed = 42;                       // fixed seed: deterministic results
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("max_iterations", &max_iterations);
+    a->Visit("confidence", &confidence);
+    a->Visit("inlier_threshold_px", &inlier_threshold_px);
+    a->Visit("min_inliers", &min_inliers);
+    a->Visit("seed", &seed);
+  }
+};
+
+struct RansacResult {
+  bool ok = false;
+  Eigen::Isometry3d T_a_b = Eigen::Isometry3d::Identity();
+  std::vector<int> inliers;  // indices into the correspondences
+  int iterations = 0;
+};
+
+// Reprojection error (max over left u, v and right u) of p_a seen from camera b, [px].
+double ForwardReprojectionError(const StereoCamera& cam, const Eigen::Isometry3d& T_a_b,
+                                const StereoCorrespondence& c);
+
+// RANSAC over minimal 3-point SVD solutions; inliers by reprojection of p_a into the stereo pair
+// at b. The best hypothesis is re-estimated by SVD on all its inliers (twice).
+RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
+                          const RansacOptions& options);
+
+struct RefineOptions {
+  int max_iterations = 10;          // Levenberg-Marquardt iterations
+  double huber_px = 1.0;            // [px] Huber loss width (down-weights remaining outliers)
+  double min_sigma_px = 0.2;        // [px] lower bound on the measured reprojection noise
+  // Multiplies the covariance: the refinement treats the triangulated points as exact, so its
+  // covariance is optimistic; >1 compensates (measured on KITTI, see docs/STEREO_VO.md).
+  double covariance_scale = 1.0;
+  // true: two-view bundle adjustment (pose and points, unbiased); false: points fixed at
+  // their triangulation, reprojected both ways (faster, but the motion comes out too long).
+  bool optimize_points = true;
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("max_iterations", &max_iterations);
+    a->Visit("huber_px", &huber_px);
+    a->Visit("min_sigma_px", &min_sigma_px);
+    a->Visit("covariance_scale", &covariance_scale);
+    a->Visit("optimize_points", &optimize_points);
+  }
+};
+
+struct RefineResult {
+  bool ok = false;
+  Eigen::Isometry3d T_a_b = Eigen::Isometry3d::Identity();
+  // Covariance of delta (T_a_b = T_hat Exp(delta), delta = [rho; phi]) from the Gauss-Newton
+  // Hessian: sigma^2 (J^T J)^-1, sigma^2 estimated from the residuals.
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  double rms_px = 0;          // [px] residual RMS at the solution
+  double initial_cost = 0;    // Ceres cost (1/2 sum rho(r^2)) before
+  double final_cost = 0;      // and after
+  int iterations = 0;
+};
+
+// Refines T_a_b on the inliers by minimizing the stereo reprojection error (u_left, v, u_right)
+// with Ceres. optimize_points: two-view bundle adjustment over the pose and every point (the
+// pose covariance is the Schur complement of the points); else the triangulated points are
+// fixed and reprojected both ways (p_a into b, p_b into a). `points_a` (optional) receives the
+// refined points in frame a.
+RefineResult RefineMotion(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
+                          const std::vector<int>& inliers, const Eigen::Isometry3d& T_a_b_initial,
+                          const RefineOptions& options,
+                          std::vector<Eigen::Vector3d>* points_a = nullptr);
+
+// Adjoint of T for the [rho; phi] ordering: Exp(Ad(T) d) = T Exp(d) T^-1.
+Eigen::Matrix<double, 6, 6> Adjoint(const Eigen::Isometry3d& T);
+
+// First-order covariance of T_ac = T_ab * T_bc (both with right perturbations, independent).
+Eigen::Matrix<double, 6, 6> ComposeCovariance(const Eigen::Matrix<double, 6, 6>& cov_ab,
+                                              const Eigen::Isometry3d& T_bc,
+                                              const Eigen::Matrix<double, 6, 6>& cov_bc);
+
+// Covariance of T_x = S * T * S^-1 (a change of frame by the fixed transform S, e.g. camera to
+// base): Ad(S) cov Ad(S)^T.
+Eigen::Matrix<double, 6, 6> ChangeFrameCovariance(const Eigen::Matrix<double, 6, 6>& cov,
+                                                  const Eigen::Isometry3d& S);
+
+}  // namespace fl::vo

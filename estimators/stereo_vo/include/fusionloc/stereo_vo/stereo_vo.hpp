@@ -1,0 +1,186 @@
+// Stereo visual odometry (MSIF §2 and §3.1.2): ORB features on a grid, quadrilateral matching,
+// 3D-3D RANSAC with the SVD solution, Ceres refinement of the stereo reprojection error, and
+// keyframe factors with the covariance of the refinement. Pure library: no LCM.
+//
+//   fl::vo::StereoVo vo(options, calibration);
+//   fl::vo::StereoVoResult r = vo.AddStereoFrame(utime, left_gray, right_gray);
+//   if (r.factor) publish(*r.factor);
+//
+// Frames: world = base frame at the first tracked frame; base x forward, y left, z up;
+// camera optical x right, y down, z forward (left camera). T_a_b = pose of b in a.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "fusionloc/common/status.hpp"
+#include "fusionloc/common/time.hpp"
+#include "fusionloc/stereo_vo/matching.hpp"
+#include "fusionloc/stereo_vo/motion.hpp"
+
+namespace fl::vo {
+
+// Calibration of a rectified stereo rig (the library's own plain struct).
+struct StereoCalibration {
+  double fx = 0, fy = 0;    // [px] focal lengths (both cameras, rectified)
+  double cx = 0, cy = 0;    // [px] principal point
+  double baseline = 0;      // [m] right camera at +baseline along the left camera's x
+  int width = 0, height = 0;  // [px] image size
+  bool rectified = true;    // the pair must be rectified and row-aligned
+  Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();  // left camera in base
+
+  // Error naming the bad field and the fix, or OK.
+  fl::Status Validate() const;
+  StereoCamera camera() const { return {fx, fy, cx, cy, baseline}; }
+};
+
+struct StereoVoOptions {
+  FeatureOptions features;
+  MatchOptions matching;
+  RansacOptions ransac;
+  RefineOptions refine;
+  bool use_refinement = true;             // Ceres refinement after RANSAC (off: SVD only)
+  // Sub-pixel disparities: each stereo match's right x by Lucas-Kanade alignment of the left
+  // patch (left corners stay as detected; see docs/STEREO_VO.md for why not temporally).
+  bool subpixel_refinement = true;
+  int subpixel_window_px = 11;            // [px] LK patch size (odd)
+  double subpixel_max_shift_px = 1.5;     // [px] larger corrections drop the match
+  int refine_rounds = 2;                  // refine, re-select inliers by reprojection, repeat
+  // Keyframes: a new one when the motion since the last keyframe or the loss of its features
+  // exceeds one of these.
+  double keyframe_translation_m = 1.0;    // [m]
+  double keyframe_rotation_deg = 10.0;    // [deg]
+  double keyframe_min_overlap = 0.5;      // [-] fraction of the keyframe's features still tracked
+  double keyframe_max_interval_s = 2.0;   // [s] at least one keyframe this often
+  // Frame checks.
+  double min_mean_intensity = 8.0;        // [gray] darker: "black frame", not tracked
+  double max_mean_intensity = 247.0;      // [gray] brighter: "saturated frame", not tracked
+  int min_features = 40;                  // fewer corners in the left image: "low texture"
+  int min_quads = 15;                     // fewer closed quadrilaterals: not tracked
+  double max_speed_mps = 40.0;            // [m/s] faster estimated motion is rejected as wrong
+  double max_gap_s = 1.0;                 // [s] longer since the last good frame: new segment
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("features", &features);
+    a->Visit("matching", &matching);
+    a->Visit("ransac", &ransac);
+    a->Visit("refine", &refine);
+    a->Visit("use_refinement", &use_refinement);
+    a->Visit("subpixel_refinement", &subpixel_refinement);
+    a->Visit("subpixel_window_px", &subpixel_window_px);
+    a->Visit("subpixel_max_shift_px", &subpixel_max_shift_px);
+    a->Visit("refine_rounds", &refine_rounds);
+    a->Visit("keyframe_translation_m", &keyframe_translation_m);
+    a->Visit("keyframe_rotation_deg", &keyframe_rotation_deg);
+    a->Visit("keyframe_min_overlap", &keyframe_min_overlap);
+    a->Visit("keyframe_max_interval_s", &keyframe_max_interval_s);
+    a->Visit("min_mean_intensity", &min_mean_intensity);
+    a->Visit("max_mean_intensity", &max_mean_intensity);
+    a->Visit("min_features", &min_features);
+    a->Visit("min_quads", &min_quads);
+    a->Visit("max_speed_mps", &max_speed_mps);
+    a->Visit("max_gap_s", &max_gap_s);
+  }
+  fl::Status Validate() const;
+};
+
+enum class TrackingState {
+  kInitialized,  // first frame (or first of a new segment): keyframe made, no motion yet
+  kTracked,      // motion estimated relative to the previous good frame
+  kNotTracked,   // this frame could not be used (message says why); no factor; state kept
+  kRejected,     // the input was invalid (sizes, time stamps); nothing changed
+};
+const char* ToString(TrackingState s);
+
+// Relative-pose factor between two keyframes, in the BASE frame:
+// T_i_j = T_world_base_i^-1 T_world_base_j, information of [dx dy dz droll dpitch dyaw]
+// (right perturbation, translation first), as fusionloc.relative_pose_factor_t.
+struct KeyframeFactor {
+  Utime utime_i = 0, utime_j = 0;
+  int64_t keyframe_id_i = -1, keyframe_id_j = -1;
+  Eigen::Isometry3d T_i_j = Eigen::Isometry3d::Identity();
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Identity();
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+};
+
+struct FrameStats {
+  int features_left = 0, features_right = 0;
+  int stereo_matches = 0;     // at this frame
+  QuadStats quads;            // quadrilateral check against the previous good frame
+  int subpixel_dropped = 0;   // stereo matches dropped by the sub-pixel alignment
+  int ransac_inliers = 0;     // RANSAC inliers
+  int inliers = 0;            // inliers of the final refinement
+  int ransac_iterations = 0;
+  double reprojection_rms_px = 0;
+  double ms_total = 0, ms_features = 0, ms_matching = 0, ms_motion = 0;
+};
+
+struct StereoVoResult {
+  TrackingState state = TrackingState::kRejected;
+  std::string message;       // human-readable: why not tracked, new segment, ...
+  Utime utime = 0;
+  bool pose_valid = false;   // T_world_* meaningful (false before the first good frame)
+  Eigen::Isometry3d T_world_base = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();
+  // Motion of the camera since the previous good frame (T_prev_cur), when tracked.
+  Eigen::Isometry3d T_prev_camera = Eigen::Isometry3d::Identity();
+  int segment = 0;           // increments when the motion chain breaks (gap too long)
+  bool new_segment = false;  // this frame starts a new segment (no factor links it back)
+  bool is_keyframe = false;
+  int64_t keyframe_id = -1;  // id of this frame if it is a keyframe
+  std::optional<KeyframeFactor> factor;  // from the previous keyframe to this one
+  // Keyframe points, left camera frame of this keyframe [m], with gray levels in [0, 1].
+  std::vector<Eigen::Vector3f> keyframe_points;
+  std::vector<float> keyframe_intensities;
+  FrameStats stats;
+};
+
+class StereoVo {
+ public:
+  // Throws std::invalid_argument with the reason if options or calibration are invalid.
+  StereoVo(const StereoVoOptions& options, const StereoCalibration& calibration);
+  ~StereoVo();
+  StereoVo(const StereoVo&) = delete;
+  StereoVo& operator=(const StereoVo&) = delete;
+
+  // Processes one rectified pair (8-bit gray or 3-channel BGR; converted to gray) taken at
+  // `utime`. Never throws on bad images: returns kRejected / kNotTracked with a message.
+  StereoVoResult AddStereoFrame(Utime utime, const cv::Mat& left, const cv::Mat& right);
+
+  const StereoCalibration& calibration() const { return calibration_; }
+  const StereoVoOptions& options() const { return options_; }
+
+ private:
+  struct Frame;
+  int RefineStereo(Frame* f) const;
+  StereoVoOptions options_;
+  StereoCalibration calibration_;
+  StereoCamera camera_;
+  FeatureExtractor extractor_;
+  std::unique_ptr<Frame> last_good_;   // previous successfully processed frame
+  Utime last_utime_ = -1;              // last accepted input time
+  bool initialized_ = false;
+  int segment_ = 0;
+  // Pose chain.
+  Eigen::Isometry3d T_world_camera_ = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d T_prev_velocity_ = Eigen::Isometry3d::Identity();  // last T_prev_cur
+  double velocity_dt_s_ = 0;          // time of that motion (0: no prediction)
+  // Keyframe chain.
+  int64_t next_keyframe_id_ = 0;
+  int64_t keyframe_id_ = -1;
+  Utime keyframe_utime_ = 0;
+  Eigen::Isometry3d T_kf_camera_ = Eigen::Isometry3d::Identity();
+  Eigen::Matrix<double, 6, 6> cov_kf_camera_ = Eigen::Matrix<double, 6, 6>::Zero();
+  int64_t keyframe_max_track_id_ = -1;
+  int keyframe_tracks_ = 0;
+  int64_t next_track_id_ = 0;
+};
+
+}  // namespace fl::vo
