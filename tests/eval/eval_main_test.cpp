@@ -68,6 +68,16 @@ TEST_F(EvalMain, GoodRunPrintsTableAndWritesJsonAndPlots) {
   EXPECT_TRUE(std::filesystem::exists(dir_.file("p_errors.png")));
 }
 
+TEST_F(EvalMain, RelationsWrittenFromReferenceAndEvaluated) {
+  Result r = RunEval(ref_ + " " + ref_ + " --write-relations " + dir_.file("rel.txt"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunEval(est_ + " " + ref_ + " --relations " + dir_.file("rel.txt"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // Every other pose is 0.1 m off in x: every relation touches one moved pose.
+  EXPECT_NE(r.output.find("relations: 199 used, 0 skipped"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("relation translation [m]"), std::string::npos) << r.output;
+}
+
 TEST_F(EvalMain, BadInputsExitNonZeroWithReason) {
   std::ofstream(dir_.file("nan.txt")) << "0 0 0 0\n0.1 nan 0 0\n";
   Result r = RunEval(dir_.file("nan.txt") + " " + ref_);

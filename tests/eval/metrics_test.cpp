@@ -54,6 +54,12 @@ TEST(EvalAte, Se3RecoversKnownRigidTransform) {
   EXPECT_LT(r.rot_deg.max, 1e-6);
   EXPECT_TRUE(r.T_ref_est.isApprox(T_ref_est, 1e-9));
   EXPECT_DOUBLE_EQ(r.scale, 1.0);
+  EXPECT_TRUE(r.warning.empty()) << r.warning;
+  // A straight line leaves the roll about it undetermined: warned.
+  const Trajectory line = MakeStraightTrajectory(20, 1.0);
+  EXPECT_NE(ComputeAte(line, line, Alignment::kSE3, 1000).warning.find("straight line"),
+            std::string::npos);
+  EXPECT_TRUE(ComputeAte(line, line, Alignment::kSE2, 1000).warning.empty());
   // Without alignment the same trajectory has a large error.
   EXPECT_GT(ComputeAte(est, ref, Alignment::kNone, 1000).trans_m.rmse, 1.0);
 }
@@ -321,6 +327,12 @@ TEST(EvalRelations, KnownErrorAndFileRoundTrip) {
     relations.push_back({ref[i].utime, ref[i + 1].utime,
                          ref[i].T_world_base.inverse() * ref[i + 1].T_world_base});
   }
+  const auto derived = RelationsFromTrajectory(ref, 1);
+  ASSERT_EQ(derived.size(), relations.size());
+  EXPECT_EQ(derived[5].utime2, relations[5].utime2);
+  EXPECT_TRUE(derived[5].T_1_2.isApprox(relations[5].T_1_2));
+  EXPECT_EQ(RelationsFromTrajectory(ref, 5).size(), 16u);
+  EXPECT_THROW(RelationsFromTrajectory(ref, 21), EvalError);
   fl::test::TempDir dir;
   WriteRelations(relations, dir.file("rel.txt"));
   const auto read = ReadRelations(dir.file("rel.txt"));

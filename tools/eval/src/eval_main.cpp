@@ -30,6 +30,7 @@ struct Args {
   std::string kitti_lengths = "auto";
   int kitti_step = 10;
   std::string relations;
+  std::string write_relations;
   std::string json;
   std::string plot;
   std::string plot_plane = "xy";
@@ -144,6 +145,11 @@ int Run(const Args& a) {
     drift = ComputeKittiDrift(est, ref, ParseLengths(a.kitti_lengths), max_dt, a.kitti_step);
     have_drift = true;
   }
+  if (!a.write_relations.empty()) {
+    WriteRelations(RelationsFromTrajectory(ref, 1), a.write_relations);
+    std::cout << "wrote " << ref.size() - 1 << " relations (consecutive reference poses) to "
+              << a.write_relations << "\n";
+  }
   RelationResult rel;
   const bool have_rel = !a.relations.empty();
   if (have_rel) rel = ComputeRelationError(est, a.relations, max_dt);
@@ -160,7 +166,9 @@ int Run(const Args& a) {
       << "pairs: " << ate.utimes.size() << " within " << std::defaultfloat << a.max_dt_s * 1000
       << " ms; alignment " << AlignmentName(alignment);
   if (alignment == Alignment::kSim3) out << " (scale " << std::setprecision(6) << ate.scale << ")";
-  out << "\n\n";
+  out << "\n";
+  if (!ate.warning.empty()) out << "warning: " << ate.warning << "\n";
+  out << "\n";
   out << "  " << std::left << std::setw(34) << "metric" << std::right << std::setw(10) << "rmse"
       << std::setw(10) << "mean" << std::setw(10) << "median" << std::setw(10) << "std"
       << std::setw(10) << "max" << std::setw(8) << "count" << "\n";
@@ -201,6 +209,7 @@ int Run(const Args& a) {
       << ",\n  \"ref_channel\": " << JsonString(IsLcmLog(a.ref_path) ? a.ref_channel : "")
       << ",\n  \"est_poses\": " << est.size() << ",\n  \"ref_poses\": " << ref.size()
       << ",\n  \"pairs\": " << ate.utimes.size() << ",\n  \"max_dt_s\": " << Num(a.max_dt_s)
+      << ",\n  \"warning\": " << JsonString(ate.warning)
       << ",\n  \"ref_path_length_m\": " << Num(ref_length, 10) << ",\n  \"alignment\": \""
       << AlignmentName(alignment) << "\",\n  \"scale\": " << Num(ate.scale, 10)
       << ",\n  \"T_ref_est\": [";
@@ -298,6 +307,8 @@ int main(int argc, char** argv) {
   cli.AddFlag("kitti-step", &a.kitti_step, "KITTI: a segment starts every this many frames");
   cli.AddFlag("relations", &a.relations,
               "relations file (t1 t2 x y z roll pitch yaw a line) for the relation error");
+  cli.AddFlag("write-relations", &a.write_relations,
+              "also write a relations file from REF (each pose to the next) for --relations");
   cli.AddFlag("json", &a.json, "write the results as JSON to this file");
   cli.AddFlag("plot", &a.plot, "write PREFIX_traj.png (top view) and PREFIX_errors.png");
   cli.AddFlag("plot-plane", &a.plot_plane,

@@ -182,6 +182,16 @@ AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment ali
   }
   AteResult r;
   r.T_ref_est = AlignPoints(src, dst, alignment, &r.scale);
+  if ((alignment == Alignment::kSE3 || alignment == Alignment::kSim3) && n >= 3) {
+    const Eigen::Matrix3Xd centred = src.colwise() - src.rowwise().mean();
+    const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(centred * centred.transpose())
+                                   .singularValues();
+    if (sv(1) <= 1e-8 * sv(0)) {
+      r.warning = "the estimated positions lie on a straight line: the rotation about that line "
+                  "is not determined by " + AlignmentName(alignment) +
+                  " alignment (rotation errors are then arbitrary); use se2 for ground robots";
+    }
+  }
   const Eigen::Matrix3d R = r.T_ref_est.linear();
   const Eigen::Vector3d t = r.T_ref_est.translation();
   for (long k = 0; k < n; ++k) {
@@ -287,15 +297,13 @@ DriftResult ComputeKittiDrift(const Trajectory& est, const Trajectory& ref,
   for (size_t first = 0; first < n; first += static_cast<size_t>(step_frames)) {
     for (size_t li = 0; li < lengths_m.size(); ++li) {
       const double len = lengths_m[li];
-      // Devkit lastFrameFromSegmentLength(): first frame with dist > dist[first] + len.
-      size_t last = n;
-      for (size_t k = first; k < n; ++k) {
-        if (dist[k] > dist[first] + len) {
-          last = k;
-          break;
-        }
-      }
-      if (last == n) continue;
+      // Devkit lastFrameFromSegmentLength(): first frame with dist > dist[first] + len
+      // (dist never decreases, so a binary search finds the same frame).
+      const size_t last = static_cast<size_t>(
+          std::upper_bound(dist.begin() + static_cast<long>(first), dist.end(),
+                           dist[first] + len) -
+          dist.begin());
+      if (last >= n) continue;
       const Eigen::Isometry3d d_gt = m.ref[first].T_world_base.inverse() * m.ref[last].T_world_base;
       const Eigen::Isometry3d d_res =
           m.est[first].T_world_base.inverse() * m.est[last].T_world_base;
@@ -403,6 +411,23 @@ void WriteRelations(const std::vector<Relation>& relations, const std::string& p
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     throw EvalError("cannot rename '" + tmp + "' to '" + path + "'");
   }
+}
+
+std::vector<Relation> RelationsFromTrajectory(const Trajectory& ref, size_t step_frames) {
+  CheckTrajectory(ref, "reference trajectory");
+  if (step_frames < 1) throw EvalError("relations need a step of at least 1 frame");
+  if (ref.size() <= step_frames) {
+    throw EvalError("reference has " + std::to_string(ref.size()) +
+                    " poses: too few for relations " + std::to_string(step_frames) +
+                    " frame(s) apart");
+  }
+  std::vector<Relation> relations;
+  for (size_t i = 0; i + step_frames < ref.size(); ++i) {
+    const auto& a = ref[i];
+    const auto& b = ref[i + step_frames];
+    relations.push_back({a.utime, b.utime, a.T_world_base.inverse() * b.T_world_base});
+  }
+  return relations;
 }
 
 RelationResult ComputeRelationError(const Trajectory& est, const std::vector<Relation>& relations,

@@ -40,6 +40,7 @@ struct AteResult {
   std::vector<double> err_yaw_deg;         // signed wrapped yaw(aligned est) - yaw(ref)
   Trajectory est_aligned;                  // aligned est poses (the associated ones)
   Trajectory ref_matched;                  // their ref poses
+  std::string warning;                     // non-empty if the alignment is ill-conditioned
 };
 // Needs at least 1 pair (kNone), 2 (kSE2) or 3 (kSE3, kSim3).
 AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment alignment,
@@ -95,6 +96,9 @@ struct Relation {
 // Text lines "t1 t2 x y z roll pitch yaw" (seconds, metres, radians; R = Rz Ry Rx), '#'
 // comments. Throws EvalError naming file:line on malformed lines.
 std::vector<Relation> ReadRelations(const std::string& path);
+// Relations between reference poses i and i + step_frames, for all i (e.g. the corrected poses
+// of a CARMEN log, consecutive scans: step 1).
+std::vector<Relation> RelationsFromTrajectory(const Trajectory& ref, size_t step_frames = 1);
 // Writes relations in the same format (e.g. to make a relations file from a reference).
 void WriteRelations(const std::vector<Relation>& relations, const std::string& path);
 
