@@ -140,7 +140,7 @@ TEST(EvalAte, BadInputsGiveClearErrors) {
 }
 
 TEST(EvalAssociate, ToleranceOneToOneAndMonotone) {
-  const Trajectory ref = MakeStraightTrajectory(20, 1.0);                       // 10 Hz
+  const Trajectory ref = MakeStraightTrajectory(20, 1.0);                      // 10 Hz
   const Trajectory shifted = MakeStraightTrajectory(20, 1.0, 1000000 + 3000);  // +3 ms
   EXPECT_EQ(Associate(shifted, ref, 10000).size(), 20u);
   EXPECT_NE(ErrorOf([&] { Associate(shifted, ref, 2000); }).find("no pair within 2 ms"),
@@ -177,12 +177,13 @@ TEST(EvalRpe, KnownPerStepError) {
   r = ComputeRpe(turning, ref, 1, DeltaUnit::kFrames, 1000);
   EXPECT_NEAR(r.rot_deg.mean, 1.0, 1e-9);
   EXPECT_NEAR(r.rot_deg.std, 0.0, 1e-9);
-  EXPECT_NE(ErrorOf([&] { ComputeRpe(est, ref, 100, DeltaUnit::kMeters, 1000); })
-                .find("longer than the associated trajectory"),
+  EXPECT_NE(ErrorOf([&] {
+              ComputeRpe(est, ref, 100, DeltaUnit::kMeters, 1000);
+            }).find("longer than the associated trajectory"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { ComputeRpe(est, ref, 1.5, DeltaUnit::kFrames, 1000); })
-                .find("whole number"),
-            std::string::npos);
+  EXPECT_NE(
+      ErrorOf([&] { ComputeRpe(est, ref, 1.5, DeltaUnit::kFrames, 1000); }).find("whole number"),
+      std::string::npos);
 }
 
 // The KITTI devkit (evaluate_odometry.cpp) written out literally, with 4x4 matrices, as an
@@ -273,11 +274,15 @@ TEST(EvalKittiDrift, EqualsDevkitDefinitionOnRandomWalk) {
   Eigen::Isometry3d T_ref = Eigen::Isometry3d::Identity(), T_est = T_ref;
   for (int i = 0; i < 400; ++i) {
     Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
-    step.translation() = Eigen::Vector3d(1.0 + 0.2 * noise(rng), 0.05 * noise(rng), 0.02 * noise(rng));
-    step.linear() = RotationFromRollPitchYaw(0.003 * noise(rng), 0.003 * noise(rng), 0.03 * noise(rng));
+    step.translation() =
+        Eigen::Vector3d(1.0 + 0.2 * noise(rng), 0.05 * noise(rng), 0.02 * noise(rng));
+    step.linear() =
+        RotationFromRollPitchYaw(0.003 * noise(rng), 0.003 * noise(rng), 0.03 * noise(rng));
     Eigen::Isometry3d step_err = Eigen::Isometry3d::Identity();
-    step_err.translation() = Eigen::Vector3d(0.01 * noise(rng), 0.01 * noise(rng), 0.005 * noise(rng));
-    step_err.linear() = RotationFromRollPitchYaw(0.001 * noise(rng), 0.001 * noise(rng), 0.002 * noise(rng));
+    step_err.translation() =
+        Eigen::Vector3d(0.01 * noise(rng), 0.01 * noise(rng), 0.005 * noise(rng));
+    step_err.linear() =
+        RotationFromRollPitchYaw(0.001 * noise(rng), 0.001 * noise(rng), 0.002 * noise(rng));
     T_ref = T_ref * step;
     T_est = T_est * step * step_err;
     ref.push_back({i * 100000, T_ref});
@@ -319,13 +324,12 @@ TEST(EvalKittiDrift, DefaultLengths) {
 }
 
 TEST(EvalRelations, KnownErrorAndFileRoundTrip) {
-  const Trajectory ref = MakePlanarTrajectory(21, [](size_t i) {
-    return Pose2(0.5 * static_cast<double>(i), 0.0, 0.0);
-  });
+  const Trajectory ref = MakePlanarTrajectory(
+      21, [](size_t i) { return Pose2(0.5 * static_cast<double>(i), 0.0, 0.0); });
   std::vector<Relation> relations;
   for (size_t i = 0; i + 1 < ref.size(); ++i) {
-    relations.push_back({ref[i].utime, ref[i + 1].utime,
-                         ref[i].T_world_base.inverse() * ref[i + 1].T_world_base});
+    relations.push_back(
+        {ref[i].utime, ref[i + 1].utime, ref[i].T_world_base.inverse() * ref[i + 1].T_world_base});
   }
   const auto derived = RelationsFromTrajectory(ref, 1);
   ASSERT_EQ(derived.size(), relations.size());
@@ -356,8 +360,9 @@ TEST(EvalRelations, KnownErrorAndFileRoundTrip) {
   EXPECT_EQ(r.used, 10u);
   EXPECT_EQ(r.skipped, 10u);
   const Trajectory late = MakeStraightTrajectory(5, 1.0, 900000000);
-  EXPECT_NE(ErrorOf([&] { ComputeRelationError(late, relations, 1000); })
-                .find("none of the 20 relations"),
+  EXPECT_NE(ErrorOf([&] {
+              ComputeRelationError(late, relations, 1000);
+            }).find("none of the 20 relations"),
             std::string::npos);
 }
 

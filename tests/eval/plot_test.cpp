@@ -17,7 +17,8 @@ int CountColor(const cv::Mat& img, const Color& c, int tol = 10) {
   for (int r = 0; r < img.rows; ++r) {
     for (int k = 0; k < img.cols; ++k) {
       const cv::Vec3b p = img.at<cv::Vec3b>(r, k);
-      if (std::abs(p[0] - c.b) <= tol && std::abs(p[1] - c.g) <= tol && std::abs(p[2] - c.r) <= tol) ++n;
+      if (std::abs(p[0] - c.b) <= tol && std::abs(p[1] - c.g) <= tol && std::abs(p[2] - c.r) <= tol)
+        ++n;
     }
   }
   return n;
@@ -74,10 +75,12 @@ TEST(EvalPlot, BadInputsThrow) {
   Trajectory nan = fl::test::MakeStraightTrajectory(3, 1.0);
   for (auto& p : nan) p.T_world_base.translation().x() = std::nan("");
   EXPECT_THROW(PlotTrajectoriesTopView(dir.file("a.png"), {{"nan", nan, kPlotRed}}), EvalError);
-  EXPECT_THROW(PlotTrajectoriesTopView(dir.file("no/such/dir/a.png"),
-                                       {{"ok", fl::test::MakeStraightTrajectory(3, 1.0), kPlotRed}}),
-               EvalError);
-  EXPECT_THROW(PlotSeries(dir.file("s.png"), "t", "x", {Panel{"y", {SeriesCurve{"c", {1, 2}, {1}, kPlotRed}}}}),
+  EXPECT_THROW(
+      PlotTrajectoriesTopView(dir.file("no/such/dir/a.png"),
+                              {{"ok", fl::test::MakeStraightTrajectory(3, 1.0), kPlotRed}}),
+      EvalError);
+  EXPECT_THROW(PlotSeries(dir.file("s.png"), "t", "x",
+                          {Panel{"y", {SeriesCurve{"c", {1, 2}, {1}, kPlotRed}}}}),
                EvalError);
   EXPECT_THROW(PlotSeries(dir.file("s.png"), "t", "x", {}), EvalError);
 }

@@ -37,8 +37,8 @@ TEST(EvalReadText, TumValuesAndQuaternionOrder) {
   WriteText(dir.file("a.tum"),
             "# timestamp tx ty tz qx qy qz qw\n\n"
             "1305031102.175304 1.0 2.0 3.0 0 0 0 1\n"
-            "1305031102.275304 1.5 2.0 3.0 0 0 " + std::to_string(h) + " " + std::to_string(h) +
-                "\n");
+            "1305031102.275304 1.5 2.0 3.0 0 0 " +
+                std::to_string(h) + " " + std::to_string(h) + "\n");
   const Trajectory t = ReadTrajectoryText(dir.file("a.tum"));
   ASSERT_EQ(t.size(), 2u);
   EXPECT_EQ(t[0].utime, 1305031102175304);
@@ -82,9 +82,9 @@ TEST(EvalReadText, KittiWithAndWithoutTimes) {
   EXPECT_NE(msg.find("has 2 times but"), std::string::npos) << msg;
 
   WriteText(dir.file("notrot.txt"), "2 0 0 0 0 1 0 0 0 0 1 0\n");
-  EXPECT_NE(ErrorOf([&] { ReadTrajectoryText(dir.file("notrot.txt"), "kitti"); })
-                .find("not a rotation"),
-            std::string::npos);
+  EXPECT_NE(
+      ErrorOf([&] { ReadTrajectoryText(dir.file("notrot.txt"), "kitti"); }).find("not a rotation"),
+      std::string::npos);
 }
 
 TEST(EvalReadText, Planar2d) {
@@ -109,8 +109,9 @@ TEST(EvalReadText, BadInputsNameFileAndLine) {
   msg = ErrorOf([&] { ReadTrajectoryText(dir.file("five.txt")); });
   EXPECT_NE(msg.find("cannot tell the trajectory format"), std::string::npos) << msg;
 
-  EXPECT_NE(ErrorOf([&] { ReadTrajectoryText(dir.file("five.txt"), "euroc"); })
-                .find("unknown trajectory format 'euroc'"),
+  EXPECT_NE(ErrorOf([&] {
+              ReadTrajectoryText(dir.file("five.txt"), "euroc");
+            }).find("unknown trajectory format 'euroc'"),
             std::string::npos);
 
   WriteText(dir.file("back.txt"), "0 0 0 0\n2 0 0 0\n1 0 0 0\n");
@@ -119,8 +120,9 @@ TEST(EvalReadText, BadInputsNameFileAndLine) {
   EXPECT_NE(msg.find("sorted"), std::string::npos) << msg;
 
   WriteText(dir.file("word.txt"), "0 0 0 zero\n");
-  EXPECT_NE(ErrorOf([&] { ReadTrajectoryText(dir.file("word.txt")); }).find("'zero' is not a number"),
-            std::string::npos);
+  EXPECT_NE(
+      ErrorOf([&] { ReadTrajectoryText(dir.file("word.txt")); }).find("'zero' is not a number"),
+      std::string::npos);
 
   WriteText(dir.file("empty.txt"), "# nothing\n\n");
   EXPECT_NE(ErrorOf([&] { ReadTrajectoryText(dir.file("empty.txt")); }).find("no poses"),
@@ -222,8 +224,7 @@ TEST(EvalReadLcm, NaNPoseIsAnError) {
     w.Write("FUSED_POSE", f, 5);
     w.Close();
   }
-  EXPECT_NE(ErrorOf([&] { ReadTrajectoryLcm(log, "FUSED_POSE"); }).find("NaN"),
-            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { ReadTrajectoryLcm(log, "FUSED_POSE"); }).find("NaN"), std::string::npos);
 }
 
 TEST(EvalReadText, RealKittiGroundTruth) {

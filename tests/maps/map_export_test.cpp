@@ -105,9 +105,9 @@ TEST(MapsGrid, InvalidGridsAreRejected) {
   g.width = 0;
   EXPECT_NE(ErrorOf([&] { SaveOccupancyGrid(g, dir.file("a")); }).find("empty map"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { SaveOccupancyGrid(MakeGrid(), dir.file("no/dir/a")); })
-                .find("cannot write"),
-            std::string::npos);
+  EXPECT_NE(
+      ErrorOf([&] { SaveOccupancyGrid(MakeGrid(), dir.file("no/dir/a")); }).find("cannot write"),
+      std::string::npos);
   EXPECT_FALSE(std::filesystem::exists(dir.file("a.pgm")));
 }
 
@@ -137,8 +137,9 @@ TEST(MapsPcd, BinaryRoundTripWithPcl) {
   EXPECT_EQ(xyz.size(), 100u);
 
   EXPECT_THROW(SavePointCloudPcd({}, {}, dir.file("e.pcd")), MapExportError);
-  EXPECT_NE(ErrorOf([&] { SavePointCloudPcd(pts, {1.0f}, dir.file("e.pcd")); })
-                .find("1 intensities for 100 points"),
+  EXPECT_NE(ErrorOf([&] {
+              SavePointCloudPcd(pts, {1.0f}, dir.file("e.pcd"));
+            }).find("1 intensities for 100 points"),
             std::string::npos);
 }
 
@@ -159,11 +160,10 @@ TEST(MapsTopView, SizeAndContent) {
       if (!(p[0] == 255 && p[1] == 255 && p[2] == 255)) ++colored;
     }
   }
-  EXPECT_GE(colored, 75);   // one pixel per point, some points share a pixel
+  EXPECT_GE(colored, 75);  // one pixel per point, some points share a pixel
   EXPECT_LE(colored, 101);
   EXPECT_THROW(SavePointCloudTopView(pts, dir.file("t.png"), 0.0), MapExportError);
-  EXPECT_NE(ErrorOf([&] { SavePointCloudTopView(pts, dir.file("t.png"), 0.0001); })
-                .find("coarser"),
+  EXPECT_NE(ErrorOf([&] { SavePointCloudTopView(pts, dir.file("t.png"), 0.0001); }).find("coarser"),
             std::string::npos);
 }
 
@@ -220,9 +220,8 @@ TEST(MapsProgram, ExportsLastGridAndCloudFromLog) {
   EXPECT_EQ(pgm.cols, 4);
 
   out.clear();
-  ASSERT_EQ(RunProgram(log + " --channel FUSED_MAP --resolution 0.1 --out " + dir.file("cloud"),
-                       &out),
-            0)
+  ASSERT_EQ(
+      RunProgram(log + " --channel FUSED_MAP --resolution 0.1 --out " + dir.file("cloud"), &out), 0)
       << out;
   pcl::PointCloud<pcl::PointXYZ> back;
   ASSERT_EQ(pcl::io::loadPCDFile(dir.file("cloud.pcd"), back), 0);

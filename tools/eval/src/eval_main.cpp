@@ -65,9 +65,9 @@ std::string JsonString(const std::string& text) {
 
 std::string JsonStats(const ErrorStats& s) {
   std::ostringstream o;
-  o << "{\"rmse\": " << Num(s.rmse) << ", \"mean\": " << Num(s.mean) << ", \"median\": "
-    << Num(s.median) << ", \"std\": " << Num(s.std) << ", \"max\": " << Num(s.max)
-    << ", \"count\": " << s.count << "}";
+  o << "{\"rmse\": " << Num(s.rmse) << ", \"mean\": " << Num(s.mean)
+    << ", \"median\": " << Num(s.median) << ", \"std\": " << Num(s.std)
+    << ", \"max\": " << Num(s.max) << ", \"count\": " << s.count << "}";
   return o.str();
 }
 
@@ -90,9 +90,9 @@ std::vector<double> ParseLengths(const std::string& text) {
 
 void PrintStatsRow(std::ostream& out, const std::string& name, const ErrorStats& s) {
   out << "  " << std::left << std::setw(34) << name << std::right << std::fixed
-      << std::setprecision(4) << std::setw(10) << s.rmse << std::setw(10) << s.mean
-      << std::setw(10) << s.median << std::setw(10) << s.std << std::setw(10) << s.max
-      << std::setw(8) << s.count << "\n";
+      << std::setprecision(4) << std::setw(10) << s.rmse << std::setw(10) << s.mean << std::setw(10)
+      << s.median << std::setw(10) << s.std << std::setw(10) << s.max << std::setw(8) << s.count
+      << "\n";
 }
 
 void WriteFileAtomically(const std::string& path, const std::string& text) {
@@ -118,12 +118,10 @@ int Run(const Args& a) {
     throw EvalError("--max-dt must be a time in seconds >= 0");
   }
   const Utime max_dt = SecondsToUtime(a.max_dt_s);
-  const Trajectory est =
-      ReadTrajectory(a.est_path, a.est_channel, a.est_format.empty() ? a.format : a.est_format,
-                     a.est_times);
-  const Trajectory ref =
-      ReadTrajectory(a.ref_path, a.ref_channel, a.ref_format.empty() ? a.format : a.ref_format,
-                     a.ref_times);
+  const Trajectory est = ReadTrajectory(
+      a.est_path, a.est_channel, a.est_format.empty() ? a.format : a.est_format, a.est_times);
+  const Trajectory ref = ReadTrajectory(
+      a.ref_path, a.ref_channel, a.ref_format.empty() ? a.format : a.ref_format, a.ref_times);
 
   const AteResult ate = ComputeAte(est, ref, alignment, max_dt);
   const RpeResult rpe = ComputeRpe(est, ref, a.rpe_delta, unit, max_dt);
@@ -156,12 +154,13 @@ int Run(const Args& a) {
 
   // ---- table ----
   std::ostream& out = std::cout;
-  const std::string unit_name =
-      unit == DeltaUnit::kFrames ? "frames" : unit == DeltaUnit::kMeters ? "m" : "s";
-  out << "est: " << a.est_path << (a.est_channel.empty() ? "" : " [" + a.est_channel + "]")
-      << "  (" << est.size() << " poses)\n"
-      << "ref: " << a.ref_path << (IsLcmLog(a.ref_path) ? " [" + a.ref_channel + "]" : "")
-      << "  (" << ref.size() << " poses, " << std::fixed << std::setprecision(2) << ref_length
+  const std::string unit_name = unit == DeltaUnit::kFrames   ? "frames"
+                                : unit == DeltaUnit::kMeters ? "m"
+                                                             : "s";
+  out << "est: " << a.est_path << (a.est_channel.empty() ? "" : " [" + a.est_channel + "]") << "  ("
+      << est.size() << " poses)\n"
+      << "ref: " << a.ref_path << (IsLcmLog(a.ref_path) ? " [" + a.ref_channel + "]" : "") << "  ("
+      << ref.size() << " poses, " << std::fixed << std::setprecision(2) << ref_length
       << " m along the associated poses)\n"
       << "pairs: " << ate.utimes.size() << " within " << std::defaultfloat << a.max_dt_s * 1000
       << " ms; alignment " << AlignmentName(alignment);
@@ -171,7 +170,8 @@ int Run(const Args& a) {
   out << "\n";
   out << "  " << std::left << std::setw(34) << "metric" << std::right << std::setw(10) << "rmse"
       << std::setw(10) << "mean" << std::setw(10) << "median" << std::setw(10) << "std"
-      << std::setw(10) << "max" << std::setw(8) << "count" << "\n";
+      << std::setw(10) << "max" << std::setw(8) << "count"
+      << "\n";
   PrintStatsRow(out, "ATE translation [m]", ate.trans_m);
   PrintStatsRow(out, "ATE rotation [deg]", ate.rot_deg);
   std::ostringstream delta_text;
@@ -190,7 +190,8 @@ int Run(const Args& a) {
         << " %  " << drift.rot_deg_per_100m << " deg/100 m  (" << drift.segments
         << " segments, every " << a.kitti_step << " frames)\n";
     out << "  " << std::setw(10) << "length [m]" << std::setw(12) << "trans [%]" << std::setw(16)
-        << "rot [deg/100m]" << std::setw(10) << "segments" << "\n";
+        << "rot [deg/100m]" << std::setw(10) << "segments"
+        << "\n";
     for (size_t i = 0; i < drift.lengths_m.size(); ++i) {
       out << "  " << std::setw(10) << std::setprecision(1) << drift.lengths_m[i] << std::setw(12)
           << std::setprecision(3) << drift.trans_pct_per_length[i] << std::setw(16)
@@ -204,8 +205,9 @@ int Run(const Args& a) {
   // ---- JSON ----
   if (!a.json.empty()) {
     std::ostringstream j;
-    j << "{\n  \"est\": " << JsonString(a.est_path) << ",\n  \"est_channel\": "
-      << JsonString(a.est_channel) << ",\n  \"ref\": " << JsonString(a.ref_path)
+    j << "{\n  \"est\": " << JsonString(a.est_path)
+      << ",\n  \"est_channel\": " << JsonString(a.est_channel)
+      << ",\n  \"ref\": " << JsonString(a.ref_path)
       << ",\n  \"ref_channel\": " << JsonString(IsLcmLog(a.ref_path) ? a.ref_channel : "")
       << ",\n  \"est_poses\": " << est.size() << ",\n  \"ref_poses\": " << ref.size()
       << ",\n  \"pairs\": " << ate.utimes.size() << ",\n  \"max_dt_s\": " << Num(a.max_dt_s)
@@ -219,13 +221,15 @@ int Run(const Args& a) {
       }
     }
     j << "],\n  \"ate\": {\"trans_m\": " << JsonStats(ate.trans_m)
-      << ", \"rot_deg\": " << JsonStats(ate.rot_deg) << "},\n  \"rpe\": {\"delta\": "
-      << Num(a.rpe_delta) << ", \"unit\": \"" << unit_name << "\", \"trans_m\": "
-      << JsonStats(rpe.trans_m) << ", \"rot_deg\": " << JsonStats(rpe.rot_deg) << "},\n";
+      << ", \"rot_deg\": " << JsonStats(ate.rot_deg)
+      << "},\n  \"rpe\": {\"delta\": " << Num(a.rpe_delta) << ", \"unit\": \"" << unit_name
+      << "\", \"trans_m\": " << JsonStats(rpe.trans_m)
+      << ", \"rot_deg\": " << JsonStats(rpe.rot_deg) << "},\n";
     if (have_drift) {
-      j << "  \"drift\": {\"trans_pct\": " << Num(drift.trans_pct) << ", \"rot_deg_per_100m\": "
-        << Num(drift.rot_deg_per_100m) << ", \"segments\": " << drift.segments
-        << ", \"step_frames\": " << a.kitti_step << ", \"per_length\": [";
+      j << "  \"drift\": {\"trans_pct\": " << Num(drift.trans_pct)
+        << ", \"rot_deg_per_100m\": " << Num(drift.rot_deg_per_100m)
+        << ", \"segments\": " << drift.segments << ", \"step_frames\": " << a.kitti_step
+        << ", \"per_length\": [";
       for (size_t i = 0; i < drift.lengths_m.size(); ++i) {
         j << (i ? ", " : "") << "{\"length_m\": " << Num(drift.lengths_m[i])
           << ", \"trans_pct\": " << Num(drift.trans_pct_per_length[i])
@@ -238,8 +242,9 @@ int Run(const Args& a) {
     }
     if (have_rel) {
       j << "  \"relations\": {\"file\": " << JsonString(a.relations)
-        << ", \"trans_m\": " << JsonStats(rel.trans_m) << ", \"rot_deg\": "
-        << JsonStats(rel.rot_deg) << ", \"trans_sq_mean_m2\": " << Num(rel.trans_sq_mean_m2)
+        << ", \"trans_m\": " << JsonStats(rel.trans_m)
+        << ", \"rot_deg\": " << JsonStats(rel.rot_deg)
+        << ", \"trans_sq_mean_m2\": " << Num(rel.trans_sq_mean_m2)
         << ", \"rot_sq_mean_deg2\": " << Num(rel.rot_sq_mean_deg2) << ", \"used\": " << rel.used
         << ", \"skipped\": " << rel.skipped << "}\n";
     } else {
@@ -255,8 +260,8 @@ int Run(const Args& a) {
     const std::string title = a.title.empty() ? a.est_name + " vs " + a.ref_name : a.title;
     TopViewOptions opt;
     std::ostringstream t;
-    t << title << "  (ATE " << std::fixed << std::setprecision(3) << ate.trans_m.rmse
-      << " m RMSE, " << AlignmentName(alignment) << ")";
+    t << title << "  (ATE " << std::fixed << std::setprecision(3) << ate.trans_m.rmse << " m RMSE, "
+      << AlignmentName(alignment) << ")";
     opt.title = t.str();
     opt.plane = a.plot_plane;
     PlotTrajectoriesTopView(a.plot + "_traj.png",

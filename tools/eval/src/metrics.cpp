@@ -84,10 +84,14 @@ Alignment ParseAlignment(const std::string& text) {
 
 std::string AlignmentName(Alignment alignment) {
   switch (alignment) {
-    case Alignment::kNone: return "none";
-    case Alignment::kSE2: return "se2";
-    case Alignment::kSE3: return "se3";
-    case Alignment::kSim3: return "sim3";
+    case Alignment::kNone:
+      return "none";
+    case Alignment::kSE2:
+      return "se2";
+    case Alignment::kSE3:
+      return "se3";
+    case Alignment::kSim3:
+      return "sim3";
   }
   return "?";
 }
@@ -163,7 +167,8 @@ Eigen::Isometry3d AlignPoints(const Eigen::Matrix3Xd& src, const Eigen::Matrix3X
   const Eigen::Matrix3d sR = M.topLeftCorner<3, 3>();
   const double s = with_scale ? std::cbrt(sR.determinant()) : 1.0;
   if (!(s > 0) || !std::isfinite(s)) {
-    throw EvalError("Sim(3) alignment failed (scale " + Fmt(s) + "); is the trajectory degenerate?");
+    throw EvalError("Sim(3) alignment failed (scale " + Fmt(s) +
+                    "); is the trajectory degenerate?");
   }
   *scale = s;
   T.linear() = Eigen::Quaterniond(sR / s).normalized().toRotationMatrix();
@@ -184,12 +189,14 @@ AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment ali
   r.T_ref_est = AlignPoints(src, dst, alignment, &r.scale);
   if ((alignment == Alignment::kSE3 || alignment == Alignment::kSim3) && n >= 3) {
     const Eigen::Matrix3Xd centred = src.colwise() - src.rowwise().mean();
-    const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(centred * centred.transpose())
-                                   .singularValues();
+    const Eigen::Vector3d sv =
+        Eigen::JacobiSVD<Eigen::Matrix3d>(centred * centred.transpose()).singularValues();
     if (sv(1) <= 1e-8 * sv(0)) {
-      r.warning = "the estimated positions lie on a straight line: the rotation about that line "
-                  "is not determined by " + AlignmentName(alignment) +
-                  " alignment (rotation errors are then arbitrary); use se2 for ground robots";
+      r.warning =
+          "the estimated positions lie on a straight line: the rotation about that line "
+          "is not determined by " +
+          AlignmentName(alignment) +
+          " alignment (rotation errors are then arbitrary); use se2 for ground robots";
     }
   }
   const Eigen::Matrix3d R = r.T_ref_est.linear();
@@ -201,8 +208,7 @@ AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment ali
     aligned.utime = pe.utime;
     aligned.T_world_base.linear() = R * pe.T_world_base.linear();
     aligned.T_world_base.translation() = r.scale * R * pe.T_world_base.translation() + t;
-    const Eigen::Vector3d d =
-        aligned.T_world_base.translation() - pr.T_world_base.translation();
+    const Eigen::Vector3d d = aligned.T_world_base.translation() - pr.T_world_base.translation();
     r.utimes.push_back(pe.utime);
     r.trans_errors_m.push_back(d.norm());
     r.rot_errors_deg.push_back(
@@ -232,9 +238,9 @@ RpeResult ComputeRpe(const Trajectory& est, const Trajectory& ref, double delta,
   const size_t n = m.est.size();
   std::vector<double> dist(n, 0.0);
   for (size_t k = 1; k < n; ++k) {
-    dist[k] = dist[k - 1] + (m.ref[k].T_world_base.translation() -
-                             m.ref[k - 1].T_world_base.translation())
-                                .norm();
+    dist[k] =
+        dist[k - 1] +
+        (m.ref[k].T_world_base.translation() - m.ref[k - 1].T_world_base.translation()).norm();
   }
   RpeResult r;
   size_t j = 0;
@@ -258,11 +264,12 @@ RpeResult ComputeRpe(const Trajectory& est, const Trajectory& ref, double delta,
     r.rot_errors_deg.push_back(AngleDeg(e.linear()));
   }
   if (r.trans_errors_m.empty()) {
-    const std::string unit_name =
-        unit == DeltaUnit::kFrames ? "frames" : unit == DeltaUnit::kMeters ? "m" : "s";
+    const std::string unit_name = unit == DeltaUnit::kFrames   ? "frames"
+                                  : unit == DeltaUnit::kMeters ? "m"
+                                                               : "s";
     throw EvalError("RPE step " + Fmt(delta) + " " + unit_name +
-                    " is longer than the associated trajectory (" + std::to_string(n) +
-                    " poses, " + Fmt(dist.back()) + " m, " +
+                    " is longer than the associated trajectory (" + std::to_string(n) + " poses, " +
+                    Fmt(dist.back()) + " m, " +
                     Fmt(UtimeToSeconds(m.ref.back().utime - m.ref.front().utime)) +
                     " s); choose a smaller --rpe-delta");
   }
@@ -286,9 +293,9 @@ DriftResult ComputeKittiDrift(const Trajectory& est, const Trajectory& ref,
   // Devkit trajectoryDistances(): cumulative path length of the ground truth.
   std::vector<double> dist(n, 0.0);
   for (size_t k = 1; k < n; ++k) {
-    dist[k] = dist[k - 1] + (m.ref[k].T_world_base.translation() -
-                             m.ref[k - 1].T_world_base.translation())
-                                .norm();
+    dist[k] =
+        dist[k - 1] +
+        (m.ref[k].T_world_base.translation() - m.ref[k - 1].T_world_base.translation()).norm();
   }
   DriftResult r;
   std::vector<double> t_sum(lengths_m.size(), 0.0), r_sum(lengths_m.size(), 0.0);
@@ -300,16 +307,15 @@ DriftResult ComputeKittiDrift(const Trajectory& est, const Trajectory& ref,
       // Devkit lastFrameFromSegmentLength(): first frame with dist > dist[first] + len
       // (dist never decreases, so a binary search finds the same frame).
       const size_t last = static_cast<size_t>(
-          std::upper_bound(dist.begin() + static_cast<long>(first), dist.end(),
-                           dist[first] + len) -
+          std::upper_bound(dist.begin() + static_cast<long>(first), dist.end(), dist[first] + len) -
           dist.begin());
       if (last >= n) continue;
       const Eigen::Isometry3d d_gt = m.ref[first].T_world_base.inverse() * m.ref[last].T_world_base;
       const Eigen::Isometry3d d_res =
           m.est[first].T_world_base.inverse() * m.est[last].T_world_base;
       const Eigen::Isometry3d err = d_res.inverse() * d_gt;
-      const double t_err = err.translation().norm() / len;       // [m/m]
-      const double r_err = AngleRad(err.linear()) / len;         // [rad/m]
+      const double t_err = err.translation().norm() / len;  // [m/m]
+      const double r_err = AngleRad(err.linear()) / len;    // [rad/m]
       t_sum[li] += t_err;
       r_sum[li] += r_err;
       ++count[li];
@@ -375,7 +381,8 @@ std::vector<Relation> ReadRelations(const std::string& path) {
     const std::string where = Where(path, line_no);
     const auto tokens = SplitTokens(trimmed);
     if (tokens.size() != 8) {
-      throw EvalError(where + ": a relation line has 8 values (t1 t2 x y z roll pitch yaw), found " +
+      throw EvalError(where +
+                      ": a relation line has 8 values (t1 t2 x y z roll pitch yaw), found " +
                       std::to_string(tokens.size()));
     }
     Relation rel;
@@ -453,11 +460,10 @@ RelationResult ComputeRelationError(const Trajectory& est, const std::vector<Rel
   if (r.used == 0) {
     throw EvalError("none of the " + std::to_string(relations.size()) +
                     " relations could be evaluated: their times (first t1 = " +
-                    Fmt(UtimeToSeconds(relations.front().utime1)) +
-                    " s) are not within " + Fmt(max_dt_us / 1000.0, 1) +
-                    " ms of an estimated pose (est covers [" + Fmt(UtimeToSeconds(est.front().utime)) +
-                    ", " + Fmt(UtimeToSeconds(est.back().utime)) +
-                    "] s); check the clocks or --max-dt");
+                    Fmt(UtimeToSeconds(relations.front().utime1)) + " s) are not within " +
+                    Fmt(max_dt_us / 1000.0, 1) + " ms of an estimated pose (est covers [" +
+                    Fmt(UtimeToSeconds(est.front().utime)) + ", " +
+                    Fmt(UtimeToSeconds(est.back().utime)) + "] s); check the clocks or --max-dt");
   }
   for (double v : t_err) r.trans_sq_mean_m2 += v * v;
   for (double v : r_err) r.rot_sq_mean_deg2 += v * v;

@@ -110,7 +110,8 @@ struct Frame {
 };
 
 cv::Point Shifted(const cv::Point2d& p) {  // sub-pixel coordinates for anti-aliased drawing
-  return cv::Point(static_cast<int>(std::lround(p.x * 16)), static_cast<int>(std::lround(p.y * 16)));
+  return cv::Point(static_cast<int>(std::lround(p.x * 16)),
+                   static_cast<int>(std::lround(p.y * 16)));
 }
 
 void Line(cv::Mat& img, const cv::Point2d& a, const cv::Point2d& b, const cv::Scalar& color,
@@ -164,7 +165,8 @@ void DrawAxes(cv::Mat& img, const Frame& f, const std::string& x_label, const st
             kLabelFontScale);
   }
   if (!y_label.empty()) {
-    const int x = std::max(2, f.rect.x - 14 - max_label_w - TextSize(y_label, kLabelFontScale).height - 6);
+    const int x =
+        std::max(2, f.rect.x - 14 - max_label_w - TextSize(y_label, kLabelFontScale).height - 6);
     PutVerticalText(img, y_label, x, f.rect.y + f.rect.height / 2, kLabelFontScale);
   }
 }
@@ -206,9 +208,11 @@ void WritePng(const cv::Mat& img, const std::string& path) {
   {
     std::ofstream out(tmp, std::ios::binary);
     if (!out) {
-      throw EvalError("cannot write plot '" + path + "': does the folder exist and is it writable?");
+      throw EvalError("cannot write plot '" + path +
+                      "': does the folder exist and is it writable?");
     }
-    out.write(reinterpret_cast<const char*>(buffer.data()), static_cast<std::streamsize>(buffer.size()));
+    out.write(reinterpret_cast<const char*>(buffer.data()),
+              static_cast<std::streamsize>(buffer.size()));
     if (!out.good()) throw EvalError("error writing plot '" + tmp + "' (disk full?)");
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
@@ -241,8 +245,8 @@ void Polyline(cv::Mat& img, const Frame& f, const std::vector<double>& xs,
 }  // namespace
 
 Color PlotColor(size_t index) {
-  static const Color kCycle[] = {kPlotBlue, kPlotOrange, kPlotGreen, kPlotRed, kPlotPurple,
-                                 kPlotGray, kPlotBlack};
+  static const Color kCycle[] = {kPlotBlue,   kPlotOrange, kPlotGreen, kPlotRed,
+                                 kPlotPurple, kPlotGray,   kPlotBlack};
   return kCycle[index % (sizeof(kCycle) / sizeof(kCycle[0]))];
 }
 
@@ -336,7 +340,8 @@ void PlotTrajectoriesTopView(const std::string& png_path,
         f.ToPx(first->T_world_base.translation().x(), first->T_world_base.translation()(vert));
     const cv::Point2d b =
         f.ToPx(last->T_world_base.translation().x(), last->T_world_base.translation()(vert));
-    cv::circle(img, cv::Point(static_cast<int>(a.x), static_cast<int>(a.y)), 6, ToScalar(c.color), 2, cv::LINE_AA);
+    cv::circle(img, cv::Point(static_cast<int>(a.x), static_cast<int>(a.y)), 6, ToScalar(c.color),
+               2, cv::LINE_AA);
     cv::rectangle(img, cv::Rect(static_cast<int>(b.x) - 5, static_cast<int>(b.y) - 5, 11, 11),
                   ToScalar(c.color), 2, cv::LINE_AA);
   }
@@ -347,12 +352,14 @@ void PlotTrajectoriesTopView(const std::string& png_path,
   const int bar_px = static_cast<int>(std::lround(bar_m / mpp));
   const cv::Point s0(f.rect.x + 15, f.rect.y + f.rect.height - 18);
   const cv::Point s1(s0.x + bar_px, s0.y);
-  cv::rectangle(img, cv::Rect(s0.x - 6, s0.y - 24, bar_px + 12, 32), cv::Scalar(255, 255, 255), cv::FILLED);
+  cv::rectangle(img, cv::Rect(s0.x - 6, s0.y - 24, bar_px + 12, 32), cv::Scalar(255, 255, 255),
+                cv::FILLED);
   cv::line(img, s0, s1, kInk, 2);
   cv::line(img, s0 + cv::Point(0, -5), s0 + cv::Point(0, 5), kInk, 2);
   cv::line(img, s1 + cv::Point(0, -5), s1 + cv::Point(0, 5), kInk, 2);
   const std::string bar_text = TickLabel(bar_m, bar_m) + " m";
-  PutText(img, bar_text, cv::Point(s0.x + bar_px / 2 - TextSize(bar_text, kTickFontScale).width / 2, s0.y - 9),
+  PutText(img, bar_text,
+          cv::Point(s0.x + bar_px / 2 - TextSize(bar_text, kTickFontScale).width / 2, s0.y - 9),
           kTickFontScale);
   DrawTitle(img, options.title.empty() ? "Trajectories (top view)" : options.title);
   WritePng(img, png_path);

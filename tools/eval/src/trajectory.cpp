@@ -48,7 +48,8 @@ Utime ParseTimesLine(const std::string& line, const std::string& where) {
   }
   const auto tokens = SplitTokens(line);
   if (tokens.size() != 1) {
-    throw EvalError(where + ": expected one time a line (seconds, or 'YYYY-MM-DD HH:MM:SS.f'), got '" +
+    throw EvalError(where +
+                    ": expected one time a line (seconds, or 'YYYY-MM-DD HH:MM:SS.f'), got '" +
                     line + "'");
   }
   return ParseSecondsUtime(tokens[0], where);
@@ -76,24 +77,23 @@ std::string FormatSeconds(Utime t) {
 
 }  // namespace
 
-double Yaw(const Eigen::Isometry3d& T) {
-  return std::atan2(T.linear()(1, 0), T.linear()(0, 0));
-}
+double Yaw(const Eigen::Isometry3d& T) { return std::atan2(T.linear()(1, 0), T.linear()(0, 0)); }
 
 void CheckTrajectory(const Trajectory& trajectory, const std::string& what) {
   if (trajectory.empty()) {
-    throw EvalError(what + " is empty: no poses; check the file/channel name and that the "
-                           "estimator produced output");
+    throw EvalError(what +
+                    " is empty: no poses; check the file/channel name and that the "
+                    "estimator produced output");
   }
   for (size_t i = 0; i < trajectory.size(); ++i) {
     const auto& T = trajectory[i].T_world_base;
     if (!T.matrix().allFinite()) {
-      throw EvalError(what + ": pose " + std::to_string(i) + " (t=" +
-                      FormatSeconds(trajectory[i].utime) + " s) contains NaN or infinity");
+      throw EvalError(what + ": pose " + std::to_string(i) +
+                      " (t=" + FormatSeconds(trajectory[i].utime) + " s) contains NaN or infinity");
     }
     if (i > 0 && trajectory[i].utime <= trajectory[i - 1].utime) {
-      throw EvalError(what + ": time does not increase at pose " + std::to_string(i) + " (t=" +
-                      FormatSeconds(trajectory[i].utime) + " s after " +
+      throw EvalError(what + ": time does not increase at pose " + std::to_string(i) +
+                      " (t=" + FormatSeconds(trajectory[i].utime) + " s after " +
                       FormatSeconds(trajectory[i - 1].utime) +
                       " s); sort the poses by time and remove duplicates");
     }
@@ -114,8 +114,9 @@ Trajectory ReadTrajectoryText(const std::string& path, const std::string& format
   std::ifstream in(path);
   if (!in) throw EvalError("cannot open trajectory file '" + path + "'");
   if (IsLcmLog(path)) {
-    throw EvalError("'" + path + "' is an LCM log, not a text trajectory; read it with a channel "
-                                 "(fl-eval --est-channel/--ref-channel)");
+    throw EvalError("'" + path +
+                    "' is an LCM log, not a text trajectory; read it with a channel "
+                    "(fl-eval --est-channel/--ref-channel)");
   }
 
   Trajectory traj;
@@ -253,7 +254,8 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
       continue;
     }
     int64_t hash = 0;
-    for (int k = 0; k < 8; ++k) hash = static_cast<int64_t>((static_cast<uint64_t>(hash) << 8) | ev.data[k]);
+    for (int k = 0; k < 8; ++k)
+      hash = static_cast<int64_t>((static_cast<uint64_t>(hash) << 8) | ev.data[k]);
     if (hash != kPoseHash && hash != kFusedHash && hash != kTrajHash && hash != kOdomHash) {
       std::ostringstream h;
       h << std::hex << static_cast<uint64_t>(hash);
@@ -277,10 +279,9 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
       StampedPose p;
       p.utime = msg.utime;
       p.T_world_base = IsometryFromArrays(msg.pos, msg.orientation);
-      const double qn = std::sqrt(msg.orientation[0] * msg.orientation[0] +
-                                  msg.orientation[1] * msg.orientation[1] +
-                                  msg.orientation[2] * msg.orientation[2] +
-                                  msg.orientation[3] * msg.orientation[3]);
+      const double qn = std::sqrt(
+          msg.orientation[0] * msg.orientation[0] + msg.orientation[1] * msg.orientation[1] +
+          msg.orientation[2] * msg.orientation[2] + msg.orientation[3] * msg.orientation[3]);
       if (!(qn > 1e-6)) {
         throw EvalError("channel '" + channel + "' in '" + log_path + "': pose at utime " +
                         std::to_string(msg.utime) + " has a zero or NaN orientation quaternion");
@@ -335,8 +336,10 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
       list += (list.empty() ? "" : ", ") + name + " (" + std::to_string(count) + ")";
     }
     if (channel.empty()) {
-      throw EvalError("'" + log_path + "' is an LCM log: name the pose channel to read; channels "
-                      "present: " + (list.empty() ? "none (empty log)" : list));
+      throw EvalError("'" + log_path +
+                      "' is an LCM log: name the pose channel to read; channels "
+                      "present: " +
+                      (list.empty() ? "none (empty log)" : list));
     }
     throw EvalError("channel '" + channel + "' not found in LCM log '" + log_path +
                     "'; channels present: " + (list.empty() ? "none (empty log)" : list));
@@ -405,8 +408,8 @@ void WriteTrajectoryTum(const Trajectory& trajectory, const std::string& path) {
       } else {
         std::snprintf(stamp, sizeof(stamp), "%.6f", UtimeToSeconds(p.utime));
       }
-      out << stamp << ' ' << t.x() << ' ' << t.y() << ' ' << t.z() << ' ' << q.x() << ' '
-          << q.y() << ' ' << q.z() << ' ' << q.w() << '\n';
+      out << stamp << ' ' << t.x() << ' ' << t.y() << ' ' << t.z() << ' ' << q.x() << ' ' << q.y()
+          << ' ' << q.z() << ' ' << q.w() << '\n';
     }
     if (!out.good()) throw EvalError("error writing '" + tmp + "'");
   }
@@ -455,11 +458,11 @@ std::vector<std::pair<size_t, size_t>> Associate(const Trajectory& est, const Tr
   }
   if (pairs.empty()) {
     std::ostringstream msg;
-    msg << std::fixed << std::setprecision(3) << "est covers t=[" << UtimeToSeconds(est.front().utime)
-        << ", " << UtimeToSeconds(est.back().utime) << "] s, ref covers ["
-        << UtimeToSeconds(ref.front().utime) << ", " << UtimeToSeconds(ref.back().utime)
-        << "] s; no pair within " << std::defaultfloat << max_dt_us / 1000.0
-        << " ms: check the channels/files (same clock?) or --max-dt";
+    msg << std::fixed << std::setprecision(3) << "est covers t=["
+        << UtimeToSeconds(est.front().utime) << ", " << UtimeToSeconds(est.back().utime)
+        << "] s, ref covers [" << UtimeToSeconds(ref.front().utime) << ", "
+        << UtimeToSeconds(ref.back().utime) << "] s; no pair within " << std::defaultfloat
+        << max_dt_us / 1000.0 << " ms: check the channels/files (same clock?) or --max-dt";
     throw EvalError(msg.str());
   }
   return pairs;
@@ -468,9 +471,9 @@ std::vector<std::pair<size_t, size_t>> Associate(const Trajectory& est, const Tr
 double PathLength(const Trajectory& trajectory) {
   double length = 0;
   for (size_t i = 1; i < trajectory.size(); ++i) {
-    length += (trajectory[i].T_world_base.translation() -
-               trajectory[i - 1].T_world_base.translation())
-                  .norm();
+    length +=
+        (trajectory[i].T_world_base.translation() - trajectory[i - 1].T_world_base.translation())
+            .norm();
   }
   return length;
 }

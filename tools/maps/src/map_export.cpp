@@ -85,8 +85,9 @@ std::vector<std::string> SaveOccupancyGrid(const fusionloc::occupancy_grid_t& g,
   ValidateGrid(g);
   if (options.free_max_percent < 0 || options.occupied_min_percent > 100 ||
       options.free_max_percent >= options.occupied_min_percent) {
-    throw MapExportError("grid export thresholds must satisfy 0 <= free_max_percent < "
-                         "occupied_min_percent <= 100");
+    throw MapExportError(
+        "grid export thresholds must satisfy 0 <= free_max_percent < "
+        "occupied_min_percent <= 100");
   }
   if (base_path.empty()) throw MapExportError("empty output path for the occupancy grid");
   const int w = g.width, h = g.height;

@@ -49,13 +49,14 @@ int Run(const std::string& log_path, const std::string& channel, const std::stri
   if (hash == kGridHash) {
     fusionloc::occupancy_grid_t grid;
     if (size < 8 || grid.decode(last.data.data(), 0, size) != size) {
-      throw fl::maps::MapExportError("the last message on '" + channel +
-                                     "' does not decode as fusionloc.occupancy_grid_t (truncated?)");
+      throw fl::maps::MapExportError(
+          "the last message on '" + channel +
+          "' does not decode as fusionloc.occupancy_grid_t (truncated?)");
     }
     const auto files = fl::maps::SaveOccupancyGrid(grid, out);
     std::cout << "occupancy grid " << grid.width << " x " << grid.height << " cells at "
-              << grid.resolution << " m (message " << on_channel << " of " << on_channel
-              << " on " << channel << ") -> ";
+              << grid.resolution << " m (message " << on_channel << " of " << on_channel << " on "
+              << channel << ") -> ";
     for (const auto& f : files) std::cout << f << " ";
     std::cout << "\n";
     return 0;
@@ -70,8 +71,8 @@ int Run(const std::string& log_path, const std::string& channel, const std::stri
     fl::maps::SavePointCloudPcd(points, cloud.intensities, out + ".pcd");
     fl::maps::SavePointCloudTopView(points, out + "_top.png", resolution);
     std::cout << "point cloud of " << points.size() << " points in frame '" << cloud.frame
-              << "' (message " << on_channel << " of " << on_channel << " on " << channel
-              << ") -> " << out << ".pcd " << out << "_top.png\n";
+              << "' (message " << on_channel << " of " << on_channel << " on " << channel << ") -> "
+              << out << ".pcd " << out << "_top.png\n";
     return 0;
   }
   throw fl::maps::MapExportError("channel '" + channel +
@@ -94,9 +95,10 @@ int main(int argc, char** argv) {
   cli.AddFlag("channel", &channel, "map channel: RBPF_MAP, FUSED_MAP, VO_POINTS, ...");
   cli.AddFlag("out", &out, "output prefix (folder must exist), e.g. out/intel_map");
   cli.AddFlag("resolution", &resolution, "point-cloud top view: metres per pixel");
-  cli.AddEpilog("\nExample:\n  fl-map-export slam.lcmlog --channel RBPF_MAP --out out/map\n"
-                "  (then: ros2 run nav2_map_server map_server --ros-args -p "
-                "yaml_filename:=out/map.yaml)\n");
+  cli.AddEpilog(
+      "\nExample:\n  fl-map-export slam.lcmlog --channel RBPF_MAP --out out/map\n"
+      "  (then: ros2 run nav2_map_server map_server --ros-args -p "
+      "yaml_filename:=out/map.yaml)\n");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
   try {
     return Run(log_path, channel, out, resolution);

@@ -33,14 +33,14 @@ struct AteResult {
   Eigen::Isometry3d T_ref_est = Eigen::Isometry3d::Identity();
   double scale = 1;
   // Per associated pair, in time order:
-  std::vector<fl::Utime> utimes;           // [us] est time stamps
-  std::vector<double> trans_errors_m;      // |p_ref - p_aligned_est|
-  std::vector<double> rot_errors_deg;      // angle of R_ref^-1 * R_aligned_est
+  std::vector<fl::Utime> utimes;                  // [us] est time stamps
+  std::vector<double> trans_errors_m;             // |p_ref - p_aligned_est|
+  std::vector<double> rot_errors_deg;             // angle of R_ref^-1 * R_aligned_est
   std::vector<double> err_x_m, err_y_m, err_z_m;  // signed p_aligned_est - p_ref, world x y z
-  std::vector<double> err_yaw_deg;         // signed wrapped yaw(aligned est) - yaw(ref)
-  Trajectory est_aligned;                  // aligned est poses (the associated ones)
-  Trajectory ref_matched;                  // their ref poses
-  std::string warning;                     // non-empty if the alignment is ill-conditioned
+  std::vector<double> err_yaw_deg;                // signed wrapped yaw(aligned est) - yaw(ref)
+  Trajectory est_aligned;                         // aligned est poses (the associated ones)
+  Trajectory ref_matched;                         // their ref poses
+  std::string warning;                            // non-empty if the alignment is ill-conditioned
 };
 // Needs at least 1 pair (kNone), 2 (kSE2) or 3 (kSE3, kSim3).
 AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment alignment,
@@ -67,8 +67,8 @@ RpeResult ComputeRpe(const Trajectory& est, const Trajectory& ref, double delta,
                      fl::Utime max_dt_us);
 
 struct DriftResult {
-  double trans_pct = 0;          // mean over all segments of |t(err)| / length * 100
-  double rot_deg_per_100m = 0;   // mean over all segments of angle(err) / length, deg/100 m
+  double trans_pct = 0;         // mean over all segments of |t(err)| / length * 100
+  double rot_deg_per_100m = 0;  // mean over all segments of angle(err) / length, deg/100 m
   size_t segments = 0;
   std::vector<double> lengths_m;  // lengths that had at least one segment
   std::vector<double> trans_pct_per_length, rot_deg_per_100m_per_length;
@@ -103,11 +103,11 @@ std::vector<Relation> RelationsFromTrajectory(const Trajectory& ref, size_t step
 void WriteRelations(const std::vector<Relation>& relations, const std::string& path);
 
 struct RelationResult {
-  ErrorStats trans_m, rot_deg;   // |t(E)| and angle(R(E)), E = T_rel_ref^-1 * T_rel_est
-  double trans_sq_mean_m2 = 0;   // mean of squared translation errors (Kuemmerle's epsilon_t^2)
+  ErrorStats trans_m, rot_deg;  // |t(E)| and angle(R(E)), E = T_rel_ref^-1 * T_rel_est
+  double trans_sq_mean_m2 = 0;  // mean of squared translation errors (Kuemmerle's epsilon_t^2)
   double rot_sq_mean_deg2 = 0;
-  size_t used = 0;               // relations whose two times were found in est
-  size_t skipped = 0;            // relations with a time not within max_dt of an est pose
+  size_t used = 0;     // relations whose two times were found in est
+  size_t skipped = 0;  // relations with a time not within max_dt of an est pose
 };
 // Kuemmerle et al. 2009. Each relation's times are looked up in est (nearest within
 // max_dt_us). Throws if no relation can be evaluated.

@@ -42,7 +42,7 @@ struct TrajectoryCurve {
 // cell (row r, col c) covers x in [origin_x + c res, ...), y in [origin_y + r res, ...);
 // cells row-major, 0..100 occupancy percent, -1 unknown.
 struct BackgroundGrid {
-  double resolution = 0;  // [m]
+  double resolution = 0;              // [m]
   double origin_x = 0, origin_y = 0;  // [m]
   int width = 0, height = 0;          // [cells]
   std::vector<int8_t> cells;
