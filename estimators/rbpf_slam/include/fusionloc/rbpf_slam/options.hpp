@@ -1,0 +1,185 @@
+// Options of the laser RBPF-SLAM estimator (config/rbpf_slam.yaml). Every field has its default
+// inline; Validate() explains what is wrong and how to fix it.
+#pragma once
+
+#include <string>
+
+#include "fusionloc/common/status.hpp"
+
+namespace fl::rbpf {
+
+// Occupancy grid and likelihood field.
+struct GridOptions {
+  double resolution = 0.05;        // [m] side of one grid cell
+  double max_range = 30.0;         // [m] maximum usable range: longer beams are ignored (like NaN,
+                                   //     inf and zero readings)
+  double field_max_distance = 0.4; // [m] the likelihood field stores the distance to the nearest
+                                   //     obstacle up to this value (≤ 15 cells); also the matcher's basin
+  double log_odds_hit = 0.9;       // [-] log-odds added to a beam's end cell
+  double log_odds_miss = -0.3;     // [-] log-odds added to every cell a beam passes through
+  double log_odds_clamp = 4.0;     // [-] |log-odds| is clamped to this (keeps the map adaptable)
+  double log_odds_occupied = 0.5;  // [-] a cell is an obstacle when its log-odds exceeds this
+  int free_space_beam_step = 1;    // [-] clear free space along every n-th beam (1 = all beams)
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("resolution", &resolution);
+    a->Visit("max_range", &max_range);
+    a->Visit("field_max_distance", &field_max_distance);
+    a->Visit("log_odds_hit", &log_odds_hit);
+    a->Visit("log_odds_miss", &log_odds_miss);
+    a->Visit("log_odds_clamp", &log_odds_clamp);
+    a->Visit("log_odds_occupied", &log_odds_occupied);
+    a->Visit("free_space_beam_step", &free_space_beam_step);
+  }
+  Status Validate() const;
+};
+
+// Odometry motion model (GMapping's srr/srt/str/stt: noise std grows with the motion).
+struct MotionOptions {
+  double srr = 0.1;   // [m/m] translation noise per metre travelled
+  double srt = 0.05;  // [m/rad] translation noise per radian turned
+  double str = 0.05;  // [rad/m] rotation noise per metre travelled
+  double stt = 0.1;   // [rad/rad] rotation noise per radian turned
+  double max_odometry_jump_m = 3.0;      // [m] an odometry step longer than this between two
+                                         //     scans is flagged as a jump and not trusted (the
+                                         //     corrected CARMEN logs have steps up to 1.8 m)
+  double max_odometry_jump_rad = 2.0;    // [rad] same for rotation (logs: up to 1.4 rad)
+  double jump_sigma_m = 0.3;             // [m] position noise used instead of a flagged jump
+  double jump_sigma_rad = 0.3;           // [rad] heading noise used instead of a flagged jump
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("srr", &srr);
+    a->Visit("srt", &srt);
+    a->Visit("str", &str);
+    a->Visit("stt", &stt);
+    a->Visit("max_odometry_jump_m", &max_odometry_jump_m);
+    a->Visit("max_odometry_jump_rad", &max_odometry_jump_rad);
+    a->Visit("jump_sigma_m", &jump_sigma_m);
+    a->Visit("jump_sigma_rad", &jump_sigma_rad);
+  }
+  Status Validate() const;
+};
+
+// Scan-to-map matcher used as the improved proposal and the likelihood-field weights (eq. 3).
+struct MatcherOptions {
+  int beam_step = 2;               // [-] use every n-th beam for matching and weighting
+  int max_iterations = 12;         // [-] Gauss-Newton iterations per particle
+  double sigma = 0.05;             // [m] std of the likelihood field (eq. 3)
+  double z_hit = 0.95;             // [-] weight of the Gaussian part of the beam likelihood
+  double z_rand = 0.05;            // [-] weight of the uniform part (random / unexplained beams)
+  double likelihood_gain = 3.0;    // [-] log-likelihoods are divided by this (GMapping's "gain")
+  double min_inlier_fraction = 0.3;// [-] a match with fewer beams inside the field falls back
+                                   //     to the odometry prediction
+  double max_correction_m = 0.5;   // [m] a match moving the pose farther than this is rejected
+  double max_correction_rad = 0.35;// [rad] same for heading
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("beam_step", &beam_step);
+    a->Visit("max_iterations", &max_iterations);
+    a->Visit("sigma", &sigma);
+    a->Visit("z_hit", &z_hit);
+    a->Visit("z_rand", &z_rand);
+    a->Visit("likelihood_gain", &likelihood_gain);
+    a->Visit("min_inlier_fraction", &min_inlier_fraction);
+    a->Visit("max_correction_m", &max_correction_m);
+    a->Visit("max_correction_rad", &max_correction_rad);
+  }
+  Status Validate() const;
+};
+
+// Point-to-line ICP between keyframe scans.
+struct IcpOptions {
+  int max_iterations = 30;            // [-]
+  double max_correspondence_m = 0.5;  // [m] first-iteration pairing distance (shrinks to `final`)
+  double final_correspondence_m = 0.15;  // [m]
+  double sigma = 0.03;                // [m] point-to-line noise used for the information JᵀJ/σ²
+  int min_points = 40;                // [-] fewer matched points: ICP fails
+  double min_inlier_fraction = 0.5;   // [-] fraction of query points matched at the end
+  double max_rms = 0.05;              // [m] RMS point-to-line residual at convergence
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("max_iterations", &max_iterations);
+    a->Visit("max_correspondence_m", &max_correspondence_m);
+    a->Visit("final_correspondence_m", &final_correspondence_m);
+    a->Visit("sigma", &sigma);
+    a->Visit("min_points", &min_points);
+    a->Visit("min_inlier_fraction", &min_inlier_fraction);
+    a->Visit("max_rms", &max_rms);
+  }
+  Status Validate() const;
+};
+
+// Keyframes, loop closures and the Ceres pose graph (the paper's §1.2 improvement).
+struct GraphOptions {
+  bool enabled = true;                 // [-] false: plain RBPF, no keyframe graph
+  double keyframe_distance = 0.5;      // [m] new keyframe after this much travel
+  double keyframe_angle = 0.35;        // [rad] or this much rotation
+  double loop_search_radius = 3.0;     // [m] keyframes closer than this are loop candidates
+  double loop_min_travel = 10.0;       // [m] path length between candidate and current keyframe
+  int loop_submap_half_width = 2;      // [-] keyframes on each side of a candidate merged as reference
+  double loop_min_inlier_fraction = 0.6;  // [-] stricter ICP verification for loop closures
+  double loop_max_rms = 0.04;          // [m]
+  double loop_huber_m = 0.1;           // [m] robust loss scale on loop-closure edges
+  int max_iterations = 50;             // [-] Levenberg-Marquardt iterations per optimisation
+  bool feed_back = true;               // [-] rebuild the particle maps from the corrected keyframes
+  double feedback_min_correction_m = 0.05;  // [m] ... when the latest keyframe moved at least this
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("enabled", &enabled);
+    a->Visit("keyframe_distance", &keyframe_distance);
+    a->Visit("keyframe_angle", &keyframe_angle);
+    a->Visit("loop_search_radius", &loop_search_radius);
+    a->Visit("loop_min_travel", &loop_min_travel);
+    a->Visit("loop_submap_half_width", &loop_submap_half_width);
+    a->Visit("loop_min_inlier_fraction", &loop_min_inlier_fraction);
+    a->Visit("loop_max_rms", &loop_max_rms);
+    a->Visit("loop_huber_m", &loop_huber_m);
+    a->Visit("max_iterations", &max_iterations);
+    a->Visit("feed_back", &feed_back);
+    a->Visit("feedback_min_correction_m", &feedback_min_correction_m);
+  }
+  Status Validate() const;
+};
+
+struct RbpfSlamOptions {
+  int particles = 30;              // [-] number of particles
+  double neff_threshold = 0.5;     // [-] resample when N_eff < neff_threshold * particles (eq. 4)
+  double linear_update = 0.2;      // [m] process a scan only after this much travel ...
+  double angular_update = 0.1;     // [rad] ... or this much rotation (GMapping linear/angularUpdate)
+  int seed = 42;                   // [-] random seed (runs are reproducible)
+  // Laser pose in the base frame (x forward, y left): set by the process from
+  // STEREO_CALIBRATION.T_base_laser when available.
+  double base_laser_x = 0.0;       // [m]
+  double base_laser_y = 0.0;       // [m]
+  double base_laser_yaw = 0.0;     // [rad]
+  GridOptions grid;
+  MotionOptions motion;
+  MatcherOptions matcher;
+  IcpOptions icp;
+  GraphOptions graph;
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("particles", &particles);
+    a->Visit("neff_threshold", &neff_threshold);
+    a->Visit("linear_update", &linear_update);
+    a->Visit("angular_update", &angular_update);
+    a->Visit("seed", &seed);
+    a->Visit("base_laser_x", &base_laser_x);
+    a->Visit("base_laser_y", &base_laser_y);
+    a->Visit("base_laser_yaw", &base_laser_yaw);
+    a->Visit("grid", &grid);
+    a->Visit("motion", &motion);
+    a->Visit("matcher", &matcher);
+    a->Visit("icp", &icp);
+    a->Visit("graph", &graph);
+  }
+  Status Validate() const;
+};
+
+}  // namespace fl::rbpf

@@ -1,0 +1,79 @@
+// A 2D pose graph (keyframes + relative-pose edges) optimised with Ceres.
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Core>
+#include <array>
+#include <vector>
+
+#include "fusionloc/common/geometry.hpp"
+
+namespace fl::rbpf {
+
+// Residual of one relative-pose edge between nodes i and j (world poses x = (x, y, θ)):
+//   e_t = R(θ_i)ᵀ (t_j − t_i) − t_ij            (translation of j in frame i minus measured)
+//   e_θ = wrap(θ_j − θ_i − θ_ij)
+//   r   = S (e_t, e_θ),  S = upper-triangular square root of the information: SᵀS = Ω_ij.
+// With AutoDiff the Jacobians are exact; the angle wrap is a constant shift of 2πk.
+struct RelativePose2Cost {
+  RelativePose2Cost(const fl::Pose2& T_i_j, const Eigen::Matrix3d& sqrt_information)
+      : t_ij_x(T_i_j.x), t_ij_y(T_i_j.y), theta_ij(T_i_j.theta), sqrt_info(sqrt_information) {}
+
+  template <typename T>
+  bool operator()(const T* const pose_world_i, const T* const pose_world_j, T* residual) const {
+    using std::cos;
+    using std::sin;
+    const T c = cos(pose_world_i[2]), s = sin(pose_world_i[2]);
+    const T dx = pose_world_j[0] - pose_world_i[0], dy = pose_world_j[1] - pose_world_i[1];
+    T e[3];
+    e[0] = c * dx + s * dy - T(t_ij_x);
+    e[1] = -s * dx + c * dy - T(t_ij_y);
+    e[2] = WrapAngleT(pose_world_j[2] - pose_world_i[2] - T(theta_ij));
+    for (int r = 0; r < 3; ++r) {
+      residual[r] = T(sqrt_info(r, 0)) * e[0] + T(sqrt_info(r, 1)) * e[1] + T(sqrt_info(r, 2)) * e[2];
+    }
+    return true;
+  }
+
+  template <typename T>
+  static T WrapAngleT(const T& a) {
+    using std::floor;
+    const T two_pi(2.0 * M_PI);
+    return a - two_pi * floor((a + T(M_PI)) / two_pi);
+  }
+
+  static ceres::CostFunction* Create(const fl::Pose2& T_i_j, const Eigen::Matrix3d& information);
+
+  double t_ij_x, t_ij_y, theta_ij;
+  Eigen::Matrix3d sqrt_info;
+};
+
+struct PoseGraphEdge {
+  int i = 0;
+  int j = 0;
+  fl::Pose2 T_i_j;
+  Eigen::Matrix3d information = Eigen::Matrix3d::Identity();
+  double huber_scale = 0.0;  // > 0: robust (Huber) loss with this scale on the whitened residual
+};
+
+class PoseGraph2D {
+ public:
+  int AddNode(const fl::Pose2& T_world_node);
+  void AddEdge(const PoseGraphEdge& edge);
+  // Levenberg-Marquardt with sparse Cholesky; node 0 is held fixed. Returns the final cost
+  // (½ Σ squared whitened residuals); `converged` tells whether Ceres reported convergence.
+  double Optimize(int max_iterations, bool* converged = nullptr);
+
+  int num_nodes() const { return static_cast<int>(nodes_.size()); }
+  int num_edges() const { return static_cast<int>(edges_.size()); }
+  fl::Pose2 pose(int i) const { return {nodes_[i][0], nodes_[i][1], nodes_[i][2]}; }
+  void set_pose(int i, const fl::Pose2& p) { nodes_[i] = {p.x, p.y, p.theta}; }
+  const std::vector<PoseGraphEdge>& edges() const { return edges_; }
+
+ private:
+  std::vector<std::array<double, 3>> nodes_;
+  std::vector<PoseGraphEdge> edges_;
+};
+
+}  // namespace fl::rbpf

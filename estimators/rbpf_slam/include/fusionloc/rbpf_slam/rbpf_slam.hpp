@@ -1,0 +1,153 @@
+// Laser RBPF-SLAM (GMapping-style Rao-Blackwellised particle filter) refined by ICP keyframe
+// constraints and a Ceres pose graph with loop closures (MSIF paper, §1 and §1.2).
+//
+// Per processed scan (after linear_update / angular_update of odometry motion):
+//   1. every particle samples the odometry motion model (srr/srt/str/stt);
+//   2. the sample is refined by scan-to-map matching on the particle's own likelihood field
+//      (improved proposal) and its weight is multiplied by p(z | x, m) (eq. 3);
+//   3. N_eff = 1 / Σ w̃² ; systematic resampling only when N_eff < N_th (eq. 4);
+//   4. the scan is integrated into each particle's copy-on-write tiled map.
+// Keyframes (every keyframe_distance / keyframe_angle of the best particle) get a point-to-line
+// ICP factor to the previous keyframe, loop closures are searched by proximity and verified by
+// ICP against a local submap, the pose graph is optimised with Ceres and the correction is fed
+// back: the particles' maps are rebuilt from the corrected keyframes and their poses shifted
+// by the correction of the latest keyframe.
+//
+// Not thread-safe; one instance per laser. No LCM: the process rbpf_slam_main.cpp adapts.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/status.hpp"
+#include "fusionloc/rbpf_slam/icp.hpp"
+#include "fusionloc/rbpf_slam/options.hpp"
+#include "fusionloc/rbpf_slam/pose_graph.hpp"
+#include "fusionloc/rbpf_slam/tiled_grid.hpp"
+#include "fusionloc/rbpf_slam/types.hpp"
+
+namespace fl::rbpf {
+
+// What AddScan did with one scan.
+struct ScanResult {
+  bool processed = false;         // the filter ran (the robot had moved enough since the last one)
+  fl::Pose2 T_world_base;         // best estimate at the scan time
+  double neff = 0.0;              // effective sample size after this scan's weights
+  bool resampled = false;
+  bool odometry_jump = false;     // the odometry step was flagged as a jump and not trusted
+  bool new_keyframe = false;
+  std::vector<KeyframeFactor> factors;  // new ICP factors (sequential and loop closures)
+  bool graph_changed = false;     // keyframe poses were corrected by the pose graph
+  int valid_beams = 0;            // beams used (others were NaN, inf, <= 0 or over range)
+};
+
+struct RbpfSlamStats {
+  int64_t scans = 0;                    // accepted scans
+  int64_t processed = 0;                // scans the filter ran on
+  int64_t dropped_time_backwards = 0;   // scans whose time did not increase
+  int64_t rejected_bad_scan = 0;        // beam count / geometry changed, non-finite odometry
+  int64_t invalid_beams = 0;            // NaN / inf / zero / over-range beams ignored
+  int64_t odometry_jumps = 0;
+  int64_t resamples = 0;
+  int64_t match_failures = 0;           // particle updates that fell back to odometry
+  int64_t keyframes = 0;
+  int64_t icp_failures = 0;             // sequential keyframe ICP that failed verification
+  int64_t loop_candidates = 0;
+  int64_t loop_closures = 0;            // verified and added to the graph
+  int64_t map_rebuilds = 0;             // corrections fed back to the filter
+};
+
+class RbpfSlam {
+ public:
+  // Throws std::invalid_argument if options.Validate() fails.
+  explicit RbpfSlam(const RbpfSlamOptions& options);
+
+  // Processes one scan with the odometry pose (T_odom_base) at the scan time. Returns an error
+  // (and changes nothing) for a scan whose time does not increase, whose beam count or
+  // geometry differs from the first scan, or with a non-finite odometry pose.
+  fl::Status AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, ScanResult* result);
+
+  // Final pose-graph optimisation (call at the end of a log before Trajectory()).
+  void Finish();
+
+  fl::Pose2 CurrentPose() const;
+  // Pose of every accepted scan: keyframe poses from the graph composed with the best
+  // particle's motion since that keyframe.
+  std::vector<StampedPose2> Trajectory() const;
+  std::vector<StampedPose2> KeyframePoses() const;
+  // Map of the best particle.
+  const TiledGrid& BestMap() const;
+  std::vector<double> NormalizedWeights() const;
+  int num_particles() const { return static_cast<int>(particles_.size()); }
+  const RbpfSlamStats& stats() const { return stats_; }
+  const RbpfSlamOptions& options() const { return opt_; }
+  // Sets the laser pose in the base frame (before the first scan).
+  fl::Status SetBaseLaser(const fl::Pose2& T_base_laser);
+
+  // N_eff = 1 / Σ w_i² of normalised weights.
+  static double EffectiveSampleSize(const std::vector<double>& normalized_weights);
+  // Systematic (low-variance) resampling: the parent index of each of the n new particles.
+  static std::vector<int> SystematicResample(const std::vector<double>& normalized_weights,
+                                             double u0);
+
+ private:
+  struct PathRecord {
+    fl::Utime utime;
+    int keyframe;          // latest keyframe when the scan arrived
+    fl::Pose2 T_kf_base;   // pose relative to that keyframe
+  };
+  struct Keyframe {
+    fl::Utime utime;
+    std::vector<Eigen::Vector2d> points_base;  // valid hits, base frame, scan order
+    std::vector<PointNormal> normals_base;
+    double path_length;                       // [m] travelled when created
+  };
+  struct Particle {
+    fl::Pose2 pose;
+    double log_w = 0.0;
+    TiledGrid map;
+  };
+
+  void ConvertScan(const LaserScan& scan, ScanResult* result);
+  void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
+  void Integrate(Particle* p);
+  void MaybeAddKeyframe(fl::Utime utime, ScanResult* result);
+  void SearchLoopClosure(int kf, ScanResult* result);
+  bool OptimizeAndFeedBack(ScanResult* result);
+  void RebuildMaps();
+  int BestIndex() const;
+
+  RbpfSlamOptions opt_;
+  fl::Pose2 T_base_laser_;
+  std::mt19937 rng_;
+  std::vector<Particle> particles_;
+  int best_ = 0;
+
+  bool initialized_ = false;
+  fl::Utime last_utime_ = 0;
+  size_t beam_count_ = 0;
+  double rad0_ = 0.0, radstep_ = 0.0;
+  fl::Pose2 last_odom_raw_;       // last accepted raw odometry
+  fl::Pose2 odom_;                // odometry with flagged jumps removed
+  fl::Pose2 odom_at_processed_;   // `odom_` when the filter last ran
+  bool pending_jump_ = false;
+  double path_length_ = 0.0;
+
+  // Per-scan buffers (reused).
+  std::vector<Eigen::Vector2d> hits_base_;     // valid beams within max range, base frame
+  std::vector<Eigen::Vector2d> match_base_;    // every beam_step-th of them
+  std::vector<Eigen::Vector2d> endpoints_world_;
+  std::vector<uint8_t> is_hit_;
+
+  std::vector<Keyframe> keyframes_;
+  PoseGraph2D graph_;
+  int graph_loop_edges_ = 0;
+  int optimized_loop_edges_ = 0;
+  std::vector<PathRecord> path_;
+  RbpfSlamStats stats_;
+};
+
+}  // namespace fl::rbpf

@@ -1,0 +1,112 @@
+// Copy-on-write tiled occupancy grid with an incrementally maintained likelihood field.
+//
+// The plane is cut into square tiles of kTileSize x kTileSize cells. A TiledGrid holds
+// shared_ptrs to tiles; copying a TiledGrid (a particle being resampled) copies only the
+// pointers, and a tile is deep-copied the first time a grid writes to a tile it shares
+// (use_count() > 1). Memory therefore grows with the area the particles disagree about, not
+// with particles x map size.
+//
+// Each cell stores the log-odds of occupancy (int16, scaled by kLogOddsScale; 0 = unknown) and
+// the Euclidean distance from its centre to the nearest obstacle cell centre (uint8, in
+// 1/kDistScale cells, saturated at the field radius). The distance field is updated locally
+// whenever a cell becomes or stops being an obstacle, so the likelihood field of eq. 3,
+// p(z) ∝ z_hit exp(-d²/2σ²) + z_rand, is a table lookup for any particle at any time.
+//
+// Cell (cx, cy) covers x in [cx*res, (cx+1)*res), likewise y; its centre is (cx+0.5)*res.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "fusionloc/common/geometry.hpp"
+#include "fusionloc/rbpf_slam/options.hpp"
+
+namespace fl::rbpf {
+
+constexpr int kTileBits = 6;
+constexpr int kTileSize = 1 << kTileBits;  // cells per tile side
+constexpr int kTileCells = kTileSize * kTileSize;
+constexpr int kDistScale = 16;             // distance units per cell
+constexpr float kLogOddsScale = 100.0f;    // stored log-odds = round(log-odds * scale)
+
+struct Tile {
+  std::array<int16_t, kTileCells> log_odds;
+  std::array<uint8_t, kTileCells> dist;
+  int occupied = 0;  // number of obstacle cells in this tile
+};
+
+inline int FloorDiv(int a, int b) { return (a >= 0) ? a / b : -((-a + b - 1) / b); }
+
+class TiledGrid {
+ public:
+  explicit TiledGrid(const GridOptions& options);
+
+  double resolution() const { return res_; }
+  // Field radius in cells and the saturated stored distance value.
+  int field_radius_cells() const { return radius_; }
+
+  // Integrates one scan: `origin_world` is the laser position, `endpoints_world` the beam
+  // ends, `is_hit[k]` false for beams only clearing free space (longer than max range).
+  void IntegrateScan(const Eigen::Vector2d& origin_world,
+                     const std::vector<Eigen::Vector2d>& endpoints_world,
+                     const std::vector<uint8_t>& is_hit);
+
+  // Distance [m] from a world point to the nearest obstacle, saturated at field_max_distance,
+  // bilinearly interpolated between cell centres; `gradient` (optional) is d(distance)/d(p).
+  double Distance(const Eigen::Vector2d& p_world, Eigen::Vector2d* gradient = nullptr) const;
+  // Same, without interpolation: the value of the cell holding p.
+  double CellDistance(int cx, int cy) const;
+
+  float LogOdds(int cx, int cy) const;
+  bool IsOccupied(int cx, int cy) const;
+  bool IsKnown(int cx, int cy) const { return LogOdds(cx, cy) != 0.0f; }
+
+  // Adds log-odds to one cell (used by IntegrateScan; public for tests).
+  void UpdateCell(int cx, int cy, int delta_scaled);
+
+  // Bounding box of allocated tiles in cells: [min_cx, max_cx) x [min_cy, max_cy).
+  // Returns false if the grid is empty.
+  bool Bounds(int* min_cx, int* min_cy, int* max_cx, int* max_cy) const;
+
+  // Number of distinct tiles this grid points to and how many it shares with someone else.
+  int NumTiles() const;
+  int NumSharedTiles() const;
+  // Identity of the tile holding a cell (nullptr if not allocated); for copy-on-write tests.
+  const Tile* TileAddress(int cx, int cy) const;
+
+  int CellX(double x) const { return static_cast<int>(std::floor(x * inv_res_)); }
+
+ private:
+  const Tile* TileAt(int tx, int ty) const {
+    const int ix = tx - tx0_, iy = ty - ty0_;
+    if (ix < 0 || iy < 0 || ix >= ntx_ || iy >= nty_) return nullptr;
+    return tiles_[static_cast<size_t>(iy) * ntx_ + ix].get();
+  }
+  Tile* MutableTile(int tx, int ty);
+  void Grow(int tx, int ty);
+  int RawDist(int cx, int cy) const;
+  void SetRawDist(int cx, int cy, int value);
+  void OnBecameOccupied(int cx, int cy);
+  void OnBecameFree(int cx, int cy);
+
+  GridOptions opt_;
+  double res_;
+  double inv_res_;
+  int radius_;       // field radius in cells
+  int dist_max_;     // stored value meaning "radius or farther"
+  int16_t hit_, miss_, clamp_, occ_threshold_;
+  // Precomputed offsets within the field radius and their scaled distances.
+  struct Offset {
+    int dx, dy, d;
+  };
+  std::vector<Offset> disk_;
+
+  int tx0_ = 0, ty0_ = 0, ntx_ = 0, nty_ = 0;
+  std::vector<std::shared_ptr<Tile>> tiles_;
+  std::shared_ptr<Tile> empty_;  // prototype of a fresh tile
+};
+
+}  // namespace fl::rbpf

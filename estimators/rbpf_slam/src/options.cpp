@@ -1,0 +1,133 @@
+#include "fusionloc/rbpf_slam/options.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace fl::rbpf {
+
+namespace {
+std::string Num(double v) {
+  std::string s = std::to_string(v);
+  while (s.size() > 1 && s.back() == '0') s.pop_back();
+  if (!s.empty() && s.back() == '.') s.pop_back();
+  return s;
+}
+Status Positive(const char* key, double v) {
+  if (!(v > 0.0) || !std::isfinite(v)) {
+    return Status::Error(std::string(key) + " = " + Num(v) + " must be a positive number");
+  }
+  return Status::Ok();
+}
+Status NonNegative(const char* key, double v) {
+  if (!(v >= 0.0) || !std::isfinite(v)) {
+    return Status::Error(std::string(key) + " = " + Num(v) + " must be >= 0");
+  }
+  return Status::Ok();
+}
+#define FL_RETURN_IF_ERROR(expr)  \
+  do {                            \
+    const Status _s = (expr);     \
+    if (!_s.ok()) return _s;      \
+  } while (0)
+}  // namespace
+
+Status GridOptions::Validate() const {
+  FL_RETURN_IF_ERROR(Positive("grid.resolution", resolution));
+  FL_RETURN_IF_ERROR(Positive("grid.max_range", max_range));
+  FL_RETURN_IF_ERROR(Positive("grid.field_max_distance", field_max_distance));
+  if (field_max_distance / resolution > 15.0 + 1e-9) {
+    return Status::Error("grid.field_max_distance = " + Num(field_max_distance) +
+                         " m is more than 15 cells of grid.resolution = " + Num(resolution) +
+                         " m; use at most " + Num(15 * resolution) + " m");
+  }
+  if (!(log_odds_hit > 0.0)) return Status::Error("grid.log_odds_hit must be > 0 (e.g. 0.9)");
+  if (!(log_odds_miss < 0.0)) return Status::Error("grid.log_odds_miss must be < 0 (e.g. -0.3)");
+  if (!(log_odds_clamp > log_odds_occupied) || log_odds_clamp > 300.0) {
+    return Status::Error("grid.log_odds_clamp must be > grid.log_odds_occupied and <= 300");
+  }
+  FL_RETURN_IF_ERROR(NonNegative("grid.log_odds_occupied", log_odds_occupied));
+  if (free_space_beam_step < 1) return Status::Error("grid.free_space_beam_step must be >= 1");
+  return Status::Ok();
+}
+
+Status MotionOptions::Validate() const {
+  FL_RETURN_IF_ERROR(NonNegative("motion.srr", srr));
+  FL_RETURN_IF_ERROR(NonNegative("motion.srt", srt));
+  FL_RETURN_IF_ERROR(NonNegative("motion.str", str));
+  FL_RETURN_IF_ERROR(NonNegative("motion.stt", stt));
+  FL_RETURN_IF_ERROR(Positive("motion.max_odometry_jump_m", max_odometry_jump_m));
+  FL_RETURN_IF_ERROR(Positive("motion.max_odometry_jump_rad", max_odometry_jump_rad));
+  FL_RETURN_IF_ERROR(NonNegative("motion.jump_sigma_m", jump_sigma_m));
+  FL_RETURN_IF_ERROR(NonNegative("motion.jump_sigma_rad", jump_sigma_rad));
+  return Status::Ok();
+}
+
+Status MatcherOptions::Validate() const {
+  if (beam_step < 1) return Status::Error("matcher.beam_step must be >= 1");
+  if (max_iterations < 0) return Status::Error("matcher.max_iterations must be >= 0");
+  FL_RETURN_IF_ERROR(Positive("matcher.sigma", sigma));
+  FL_RETURN_IF_ERROR(Positive("matcher.z_hit", z_hit));
+  FL_RETURN_IF_ERROR(Positive("matcher.z_rand", z_rand));
+  FL_RETURN_IF_ERROR(Positive("matcher.likelihood_gain", likelihood_gain));
+  if (!(min_inlier_fraction >= 0.0 && min_inlier_fraction <= 1.0)) {
+    return Status::Error("matcher.min_inlier_fraction must be in [0, 1]");
+  }
+  FL_RETURN_IF_ERROR(Positive("matcher.max_correction_m", max_correction_m));
+  FL_RETURN_IF_ERROR(Positive("matcher.max_correction_rad", max_correction_rad));
+  return Status::Ok();
+}
+
+Status IcpOptions::Validate() const {
+  if (max_iterations < 1) return Status::Error("icp.max_iterations must be >= 1");
+  FL_RETURN_IF_ERROR(Positive("icp.max_correspondence_m", max_correspondence_m));
+  FL_RETURN_IF_ERROR(Positive("icp.final_correspondence_m", final_correspondence_m));
+  if (final_correspondence_m > max_correspondence_m) {
+    return Status::Error("icp.final_correspondence_m must be <= icp.max_correspondence_m");
+  }
+  FL_RETURN_IF_ERROR(Positive("icp.sigma", sigma));
+  if (min_points < 3) return Status::Error("icp.min_points must be >= 3");
+  if (!(min_inlier_fraction >= 0.0 && min_inlier_fraction <= 1.0)) {
+    return Status::Error("icp.min_inlier_fraction must be in [0, 1]");
+  }
+  FL_RETURN_IF_ERROR(Positive("icp.max_rms", max_rms));
+  return Status::Ok();
+}
+
+Status GraphOptions::Validate() const {
+  FL_RETURN_IF_ERROR(Positive("graph.keyframe_distance", keyframe_distance));
+  FL_RETURN_IF_ERROR(Positive("graph.keyframe_angle", keyframe_angle));
+  FL_RETURN_IF_ERROR(Positive("graph.loop_search_radius", loop_search_radius));
+  FL_RETURN_IF_ERROR(NonNegative("graph.loop_min_travel", loop_min_travel));
+  if (loop_submap_half_width < 0) return Status::Error("graph.loop_submap_half_width must be >= 0");
+  if (!(loop_min_inlier_fraction >= 0.0 && loop_min_inlier_fraction <= 1.0)) {
+    return Status::Error("graph.loop_min_inlier_fraction must be in [0, 1]");
+  }
+  FL_RETURN_IF_ERROR(Positive("graph.loop_max_rms", loop_max_rms));
+  FL_RETURN_IF_ERROR(NonNegative("graph.loop_huber_m", loop_huber_m));
+  if (max_iterations < 1) return Status::Error("graph.max_iterations must be >= 1");
+  FL_RETURN_IF_ERROR(NonNegative("graph.feedback_min_correction_m", feedback_min_correction_m));
+  return Status::Ok();
+}
+
+Status RbpfSlamOptions::Validate() const {
+  if (particles < 1 || particles > 10000) {
+    return Status::Error("particles = " + std::to_string(particles) + " must be in [1, 10000]");
+  }
+  if (!(neff_threshold >= 0.0 && neff_threshold <= 1.0)) {
+    return Status::Error("neff_threshold = " + Num(neff_threshold) +
+                         " must be in [0, 1] (a fraction of the particle count; 0.5 = N/2)");
+  }
+  FL_RETURN_IF_ERROR(NonNegative("linear_update", linear_update));
+  FL_RETURN_IF_ERROR(NonNegative("angular_update", angular_update));
+  if (!std::isfinite(base_laser_x) || !std::isfinite(base_laser_y) || !std::isfinite(base_laser_yaw)) {
+    return Status::Error("base_laser_x/y/yaw must be finite");
+  }
+  FL_RETURN_IF_ERROR(grid.Validate());
+  FL_RETURN_IF_ERROR(motion.Validate());
+  FL_RETURN_IF_ERROR(matcher.Validate());
+  FL_RETURN_IF_ERROR(icp.Validate());
+  FL_RETURN_IF_ERROR(graph.Validate());
+  return Status::Ok();
+}
+
+}  // namespace fl::rbpf

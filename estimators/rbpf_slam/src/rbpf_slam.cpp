@@ -1,0 +1,434 @@
+#include "fusionloc/rbpf_slam/rbpf_slam.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+#include "fusionloc/rbpf_slam/scan_matcher.hpp"
+
+namespace fl::rbpf {
+
+namespace {
+// Weak information for a sequential graph edge when ICP failed (keeps the graph connected):
+// σ = 0.1 m, 0.05 rad.
+Eigen::Matrix3d WeakInformation() {
+  return Eigen::Vector3d(100.0, 100.0, 400.0).asDiagonal();
+}
+}  // namespace
+
+RbpfSlam::RbpfSlam(const RbpfSlamOptions& options)
+    : opt_(options),
+      T_base_laser_(options.base_laser_x, options.base_laser_y, options.base_laser_yaw),
+      rng_(static_cast<uint32_t>(options.seed)) {
+  const Status s = options.Validate();
+  if (!s.ok()) throw std::invalid_argument("RbpfSlamOptions: " + s.message());
+  particles_.reserve(options.particles);
+  for (int i = 0; i < options.particles; ++i) {
+    particles_.push_back(Particle{fl::Pose2(), 0.0, TiledGrid(options.grid)});
+  }
+}
+
+fl::Status RbpfSlam::SetBaseLaser(const fl::Pose2& T_base_laser) {
+  if (!std::isfinite(T_base_laser.x) || !std::isfinite(T_base_laser.y) ||
+      !std::isfinite(T_base_laser.theta)) {
+    return Status::Error("T_base_laser is not finite");
+  }
+  if (initialized_) {
+    return Status::Error("T_base_laser can only be set before the first scan");
+  }
+  T_base_laser_ = T_base_laser;
+  return Status::Ok();
+}
+
+double RbpfSlam::EffectiveSampleSize(const std::vector<double>& w) {
+  double s = 0.0;
+  for (double x : w) s += x * x;
+  return s > 0.0 ? 1.0 / s : 0.0;
+}
+
+std::vector<int> RbpfSlam::SystematicResample(const std::vector<double>& w, double u0) {
+  const int n = static_cast<int>(w.size());
+  std::vector<int> parents(n);
+  double c = w.empty() ? 0.0 : w[0];
+  int i = 0;
+  for (int m = 0; m < n; ++m) {
+    const double u = (u0 + m) / n;
+    while (u > c && i < n - 1) c += w[++i];
+    parents[m] = i;
+  }
+  return parents;
+}
+
+std::vector<double> RbpfSlam::NormalizedWeights() const {
+  double mx = -std::numeric_limits<double>::infinity();
+  for (const auto& p : particles_) mx = std::max(mx, p.log_w);
+  std::vector<double> w(particles_.size());
+  double sum = 0.0;
+  for (size_t i = 0; i < particles_.size(); ++i) {
+    w[i] = std::exp(particles_[i].log_w - mx);
+    sum += w[i];
+  }
+  for (double& x : w) x /= sum;
+  return w;
+}
+
+int RbpfSlam::BestIndex() const {
+  int best = 0;
+  for (size_t i = 1; i < particles_.size(); ++i) {
+    if (particles_[i].log_w > particles_[best].log_w) best = static_cast<int>(i);
+  }
+  return best;
+}
+
+fl::Pose2 RbpfSlam::CurrentPose() const {
+  return particles_[best_].pose * odom_at_processed_.between(odom_);
+}
+
+const TiledGrid& RbpfSlam::BestMap() const { return particles_[best_].map; }
+
+void RbpfSlam::ConvertScan(const LaserScan& scan, ScanResult* result) {
+  hits_base_.clear();
+  const double c = std::cos(T_base_laser_.theta), s = std::sin(T_base_laser_.theta);
+  for (size_t k = 0; k < scan.ranges.size(); ++k) {
+    const float r = scan.ranges[k];
+    if (!std::isfinite(r) || r <= 0.0f || r > opt_.grid.max_range) {
+      ++stats_.invalid_beams;
+      continue;
+    }
+    const double a = scan.rad0 + static_cast<double>(k) * scan.radstep;
+    const double lx = r * std::cos(a), ly = r * std::sin(a);
+    hits_base_.emplace_back(T_base_laser_.x + c * lx - s * ly, T_base_laser_.y + s * lx + c * ly);
+  }
+  match_base_.clear();
+  for (size_t k = 0; k < hits_base_.size(); k += opt_.matcher.beam_step) {
+    match_base_.push_back(hits_base_[k]);
+  }
+  result->valid_beams = static_cast<int>(hits_base_.size());
+}
+
+fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, ScanResult* result) {
+  ScanResult local;
+  ScanResult* res = result ? result : &local;
+  *res = ScanResult();
+  // --- Validate the input before touching any state.
+  if (initialized_ && scan.utime <= last_utime_) {
+    ++stats_.dropped_time_backwards;
+    return Status::Error("scan at utime " + std::to_string(scan.utime) +
+                         " does not come after the previous one (" + std::to_string(last_utime_) +
+                         "); dropped");
+  }
+  if (!std::isfinite(odom_pose.x) || !std::isfinite(odom_pose.y) || !std::isfinite(odom_pose.theta)) {
+    ++stats_.rejected_bad_scan;
+    return Status::Error("odometry pose at utime " + std::to_string(scan.utime) +
+                         " is not finite; scan dropped");
+  }
+  if (scan.ranges.empty() || !std::isfinite(scan.rad0) || !std::isfinite(scan.radstep) ||
+      scan.radstep == 0.0) {
+    ++stats_.rejected_bad_scan;
+    return Status::Error("scan at utime " + std::to_string(scan.utime) +
+                         " has no beams or a non-finite/zero angle step; dropped");
+  }
+  if (initialized_ && (scan.ranges.size() != beam_count_ || std::abs(scan.rad0 - rad0_) > 1e-6 ||
+                       std::abs(scan.radstep - radstep_) > 1e-9)) {
+    ++stats_.rejected_bad_scan;
+    return Status::Error("scan at utime " + std::to_string(scan.utime) + " has " +
+                         std::to_string(scan.ranges.size()) + " beams (rad0 " +
+                         std::to_string(scan.rad0) + ", step " + std::to_string(scan.radstep) +
+                         ") but the first scan had " + std::to_string(beam_count_) + " (rad0 " +
+                         std::to_string(rad0_) + ", step " + std::to_string(radstep_) +
+                         "); a laser cannot change its geometry: check the LASER channel");
+  }
+  ++stats_.scans;
+  ConvertScan(scan, res);
+
+  if (!initialized_) {
+    initialized_ = true;
+    beam_count_ = scan.ranges.size();
+    rad0_ = scan.rad0;
+    radstep_ = scan.radstep;
+    last_utime_ = scan.utime;
+    last_odom_raw_ = odom_pose;
+    odom_ = odom_pose;
+    odom_at_processed_ = odom_;
+    for (auto& p : particles_) p.pose = odom_pose;
+    Integrate(&particles_[0]);
+    for (size_t i = 1; i < particles_.size(); ++i) particles_[i].map = particles_[0].map;
+    ++stats_.processed;
+    res->processed = true;
+    res->T_world_base = odom_pose;
+    res->neff = static_cast<double>(particles_.size());
+    MaybeAddKeyframe(scan.utime, res);
+    path_.push_back({scan.utime, 0, fl::Pose2()});
+    return Status::Ok();
+  }
+
+  last_utime_ = scan.utime;
+  // --- Odometry step since the previous scan; a jump is replaced by "no motion" plus noise.
+  const fl::Pose2 step = last_odom_raw_.between(odom_pose);
+  last_odom_raw_ = odom_pose;
+  if (std::hypot(step.x, step.y) > opt_.motion.max_odometry_jump_m ||
+      std::abs(step.theta) > opt_.motion.max_odometry_jump_rad) {
+    ++stats_.odometry_jumps;
+    pending_jump_ = true;
+    res->odometry_jump = true;
+  } else {
+    odom_ = odom_ * step;
+  }
+  const fl::Pose2 delta = odom_at_processed_.between(odom_);
+  const bool moved = std::hypot(delta.x, delta.y) >= opt_.linear_update ||
+                     std::abs(delta.theta) >= opt_.angular_update;
+  if (moved || pending_jump_) {
+    ProcessFilter(delta, pending_jump_, res);
+    pending_jump_ = false;
+    odom_at_processed_ = odom_;
+    path_length_ += std::hypot(delta.x, delta.y);
+    MaybeAddKeyframe(scan.utime, res);
+  }
+  res->T_world_base = CurrentPose();
+  const int kf = static_cast<int>(keyframes_.size()) - 1;
+  path_.push_back({scan.utime, kf, graph_.pose(kf).between(res->T_world_base)});
+  return Status::Ok();
+}
+
+void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res) {
+  ++stats_.processed;
+  res->processed = true;
+  const MotionOptions& m = opt_.motion;
+  const double trans = std::hypot(delta.x, delta.y), rot = std::abs(delta.theta);
+  double sx = m.srr * std::abs(delta.x) + m.srt * rot;
+  double sy = m.srr * std::abs(delta.y) + m.srt * rot;
+  double st = m.stt * rot + m.str * trans;
+  if (jump) {
+    sx = std::hypot(sx, m.jump_sigma_m);
+    sy = std::hypot(sy, m.jump_sigma_m);
+    st = std::hypot(st, m.jump_sigma_rad);
+  }
+  std::normal_distribution<double> n01(0.0, 1.0);
+  MatcherOptions mo = opt_.matcher;
+  if (jump) {
+    mo.max_correction_m = std::max(mo.max_correction_m, 3.0 * m.jump_sigma_m);
+    mo.max_correction_rad = std::max(mo.max_correction_rad, 3.0 * m.jump_sigma_rad);
+  }
+  // 1-2. Sample the motion model, refine by scan matching, weight by the likelihood field.
+  for (Particle& p : particles_) {
+    const fl::Pose2 noisy(delta.x + sx * n01(rng_), delta.y + sy * n01(rng_),
+                          delta.theta + st * n01(rng_));
+    const fl::Pose2 predicted = p.pose * noisy;
+    const MatchResult mr = MatchScan(p.map, match_base_, predicted, mo);
+    if (!mr.ok) ++stats_.match_failures;
+    p.pose = mr.T_world_base;
+    p.log_w += mr.log_likelihood / opt_.matcher.likelihood_gain;
+  }
+  // Keep log weights bounded (normalise in log space).
+  double mx = -std::numeric_limits<double>::infinity();
+  for (const auto& p : particles_) mx = std::max(mx, p.log_w);
+  for (auto& p : particles_) p.log_w -= mx;
+  const std::vector<double> w = NormalizedWeights();
+  res->neff = EffectiveSampleSize(w);
+  best_ = BestIndex();
+  // 3. Adaptive resampling (eq. 4); 4. integrate the scan (once per distinct parent).
+  if (res->neff < opt_.neff_threshold * static_cast<double>(particles_.size())) {
+    ++stats_.resamples;
+    res->resampled = true;
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const std::vector<int> parents = SystematicResample(w, u(rng_));
+    std::vector<int> first_child(particles_.size(), -1);
+    for (size_t i = 0; i < parents.size(); ++i) {
+      if (first_child[parents[i]] < 0) first_child[parents[i]] = static_cast<int>(i);
+    }
+    for (size_t i = 0; i < particles_.size(); ++i) {
+      if (first_child[i] >= 0) Integrate(&particles_[i]);
+    }
+    std::vector<Particle> next;
+    next.reserve(particles_.size());
+    int new_best = 0;
+    for (size_t i = 0; i < parents.size(); ++i) {
+      next.push_back(particles_[parents[i]]);
+      next.back().log_w = 0.0;
+      if (parents[i] == best_ && first_child[best_] == static_cast<int>(i)) new_best = static_cast<int>(i);
+    }
+    particles_ = std::move(next);
+    best_ = new_best;
+  } else {
+    for (Particle& p : particles_) Integrate(&p);
+  }
+  res->T_world_base = particles_[best_].pose;
+}
+
+void RbpfSlam::Integrate(Particle* p) {
+  endpoints_world_.resize(hits_base_.size());
+  is_hit_.assign(hits_base_.size(), 1);
+  for (size_t k = 0; k < hits_base_.size(); ++k) endpoints_world_[k] = p->pose * hits_base_[k];
+  p->map.IntegrateScan(p->pose * T_base_laser_.translation(), endpoints_world_, is_hit_);
+}
+
+void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
+  const fl::Pose2 pose = particles_[best_].pose;
+  if (!keyframes_.empty()) {
+    const fl::Pose2 d = graph_.pose(static_cast<int>(keyframes_.size()) - 1).between(pose);
+    if (std::hypot(d.x, d.y) < opt_.graph.keyframe_distance &&
+        std::abs(d.theta) < opt_.graph.keyframe_angle) {
+      return;
+    }
+  }
+  Keyframe kf;
+  kf.utime = utime;
+  kf.points_base = hits_base_;
+  kf.normals_base = ComputeNormals(kf.points_base);
+  kf.path_length = path_length_;
+  keyframes_.push_back(std::move(kf));
+  const int j = graph_.AddNode(pose);
+  ++stats_.keyframes;
+  res->new_keyframe = true;
+  if (j == 0) return;
+  const int i = j - 1;
+  const fl::Pose2 prior = graph_.pose(i).between(pose);
+  PoseGraphEdge edge;
+  edge.i = i;
+  edge.j = j;
+  edge.T_i_j = prior;
+  edge.information = WeakInformation();
+  if (opt_.graph.enabled) {
+    const IcpResult icp =
+        AlignPointToLine(keyframes_[i].normals_base, keyframes_[j].points_base, prior, opt_.icp);
+    const fl::Pose2 jump = prior.between(icp.T_ref_query);
+    if (icp.ok && std::hypot(jump.x, jump.y) < 0.5 && std::abs(jump.theta) < 0.3) {
+      edge.T_i_j = icp.T_ref_query;
+      edge.information = icp.information;
+      KeyframeFactor f;
+      f.keyframe_i = i;
+      f.keyframe_j = j;
+      f.utime_i = keyframes_[i].utime;
+      f.utime_j = keyframes_[j].utime;
+      f.T_i_j = icp.T_ref_query;
+      f.information = icp.information;
+      f.rms = icp.rms;
+      f.inlier_fraction = icp.inlier_fraction;
+      res->factors.push_back(f);
+    } else {
+      ++stats_.icp_failures;
+    }
+  }
+  graph_.AddEdge(edge);
+  if (opt_.graph.enabled) SearchLoopClosure(j, res);
+}
+
+void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
+  const GraphOptions& g = opt_.graph;
+  const fl::Pose2 pj = graph_.pose(j);
+  int cand = -1;
+  double best_d = g.loop_search_radius;
+  for (int c = 0; c < j; ++c) {
+    if (keyframes_[j].path_length - keyframes_[c].path_length < g.loop_min_travel) continue;
+    const fl::Pose2 pc = graph_.pose(c);
+    const double d = std::hypot(pc.x - pj.x, pc.y - pj.y);
+    if (d < best_d) {
+      best_d = d;
+      cand = c;
+    }
+  }
+  if (cand < 0) return;
+  ++stats_.loop_candidates;
+  // Reference: the candidate and its neighbours, in the candidate's base frame.
+  std::vector<PointNormal> ref;
+  const fl::Pose2 pc = graph_.pose(cand);
+  const int n = static_cast<int>(keyframes_.size());
+  for (int k = std::max(0, cand - g.loop_submap_half_width);
+       k <= std::min(n - 1, cand + g.loop_submap_half_width); ++k) {
+    if (keyframes_[j].path_length - keyframes_[k].path_length < g.loop_min_travel) continue;
+    const fl::Pose2 T_c_k = pc.between(graph_.pose(k));
+    const Eigen::Matrix2d R = T_c_k.rotation();
+    for (const PointNormal& pn : keyframes_[k].normals_base) {
+      PointNormal q;
+      q.p = T_c_k * pn.p;
+      q.n = R * pn.n;
+      ref.push_back(q);
+    }
+  }
+  IcpOptions io = opt_.icp;
+  io.min_inlier_fraction = g.loop_min_inlier_fraction;
+  io.max_rms = g.loop_max_rms;
+  io.max_correspondence_m = std::max(io.max_correspondence_m, 1.0);
+  const fl::Pose2 prior = pc.between(pj);
+  const IcpResult icp = AlignPointToLine(ref, keyframes_[j].points_base, prior, io);
+  if (!icp.ok) return;
+  PoseGraphEdge edge;
+  edge.i = cand;
+  edge.j = j;
+  edge.T_i_j = icp.T_ref_query;
+  edge.information = icp.information;
+  edge.huber_scale = g.loop_huber_m > 0 ? g.loop_huber_m / opt_.icp.sigma : 0.0;
+  graph_.AddEdge(edge);
+  ++graph_loop_edges_;
+  ++stats_.loop_closures;
+  KeyframeFactor f;
+  f.keyframe_i = cand;
+  f.keyframe_j = j;
+  f.utime_i = keyframes_[cand].utime;
+  f.utime_j = keyframes_[j].utime;
+  f.T_i_j = icp.T_ref_query;
+  f.information = icp.information;
+  f.is_loop_closure = true;
+  f.rms = icp.rms;
+  f.inlier_fraction = icp.inlier_fraction;
+  res->factors.push_back(f);
+  OptimizeAndFeedBack(res);
+}
+
+bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
+  if (graph_loop_edges_ == optimized_loop_edges_) return false;
+  const int last = graph_.num_nodes() - 1;
+  const fl::Pose2 before = graph_.pose(last);
+  graph_.Optimize(opt_.graph.max_iterations);
+  optimized_loop_edges_ = graph_loop_edges_;
+  if (res) res->graph_changed = true;
+  const fl::Pose2 after = graph_.pose(last);
+  const fl::Pose2 T_corr = after * before.inverse();
+  if (!opt_.graph.feed_back) return true;
+  const fl::Pose2 c = before.between(after);
+  if (std::hypot(c.x, c.y) < opt_.graph.feedback_min_correction_m && std::abs(c.theta) < 0.02) {
+    return true;
+  }
+  // Feed back: shift every particle by the correction of the latest keyframe and give all of
+  // them the map rebuilt from the corrected keyframes.
+  for (Particle& p : particles_) p.pose = T_corr * p.pose;
+  RebuildMaps();
+  ++stats_.map_rebuilds;
+  return true;
+}
+
+void RbpfSlam::RebuildMaps() {
+  TiledGrid map(opt_.grid);
+  std::vector<Eigen::Vector2d> ends;
+  std::vector<uint8_t> hit;
+  for (int k = 0; k < graph_.num_nodes(); ++k) {
+    const fl::Pose2 T = graph_.pose(k);
+    ends.resize(keyframes_[k].points_base.size());
+    hit.assign(ends.size(), 1);
+    for (size_t i = 0; i < ends.size(); ++i) ends[i] = T * keyframes_[k].points_base[i];
+    map.IntegrateScan(T * T_base_laser_.translation(), ends, hit);
+  }
+  for (Particle& p : particles_) p.map = map;
+}
+
+void RbpfSlam::Finish() {
+  if (opt_.graph.enabled) OptimizeAndFeedBack(nullptr);
+}
+
+std::vector<StampedPose2> RbpfSlam::Trajectory() const {
+  std::vector<StampedPose2> out;
+  out.reserve(path_.size());
+  for (const PathRecord& r : path_) out.push_back({r.utime, graph_.pose(r.keyframe) * r.T_kf_base});
+  return out;
+}
+
+std::vector<StampedPose2> RbpfSlam::KeyframePoses() const {
+  std::vector<StampedPose2> out;
+  for (int k = 0; k < graph_.num_nodes(); ++k) out.push_back({keyframes_[k].utime, graph_.pose(k)});
+  return out;
+}
+
+}  // namespace fl::rbpf

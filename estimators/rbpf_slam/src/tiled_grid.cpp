@@ -1,0 +1,283 @@
+#include "fusionloc/rbpf_slam/tiled_grid.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace fl::rbpf {
+
+namespace {
+inline int LocalIndex(int cx, int cy) {
+  return ((cy & (kTileSize - 1)) << kTileBits) | (cx & (kTileSize - 1));
+}
+int16_t ScaleLogOdds(double l) {
+  return static_cast<int16_t>(std::lround(l * kLogOddsScale));
+}
+}  // namespace
+
+TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
+  const Status s = options.Validate();
+  if (!s.ok()) throw std::invalid_argument("TiledGrid: " + s.message());
+  res_ = options.resolution;
+  inv_res_ = 1.0 / res_;
+  radius_ = std::max(1, static_cast<int>(std::ceil(options.field_max_distance / res_ - 1e-9)));
+  dist_max_ = radius_ * kDistScale;
+  hit_ = ScaleLogOdds(options.log_odds_hit);
+  miss_ = ScaleLogOdds(options.log_odds_miss);
+  clamp_ = ScaleLogOdds(options.log_odds_clamp);
+  occ_threshold_ = ScaleLogOdds(options.log_odds_occupied);
+  for (int dy = -radius_; dy <= radius_; ++dy) {
+    for (int dx = -radius_; dx <= radius_; ++dx) {
+      const int d = static_cast<int>(std::lround(std::sqrt(dx * dx + dy * dy) * kDistScale));
+      if (d <= dist_max_) disk_.push_back({dx, dy, d});
+    }
+  }
+  empty_ = std::make_shared<Tile>();
+  empty_->log_odds.fill(0);
+  empty_->dist.fill(static_cast<uint8_t>(dist_max_));
+  empty_->occupied = 0;
+}
+
+void TiledGrid::Grow(int tx, int ty) {
+  if (ntx_ == 0) {
+    // First tile: start with a small window around it.
+    tx0_ = tx - 2;
+    ty0_ = ty - 2;
+    ntx_ = nty_ = 5;
+    tiles_.assign(static_cast<size_t>(ntx_) * nty_, nullptr);
+    return;
+  }
+  const int nx0 = std::min(tx0_, tx - 2), ny0 = std::min(ty0_, ty - 2);
+  const int nx1 = std::max(tx0_ + ntx_, tx + 3), ny1 = std::max(ty0_ + nty_, ty + 3);
+  std::vector<std::shared_ptr<Tile>> next(static_cast<size_t>(nx1 - nx0) * (ny1 - ny0));
+  for (int iy = 0; iy < nty_; ++iy) {
+    for (int ix = 0; ix < ntx_; ++ix) {
+      next[static_cast<size_t>(iy + ty0_ - ny0) * (nx1 - nx0) + (ix + tx0_ - nx0)] =
+          std::move(tiles_[static_cast<size_t>(iy) * ntx_ + ix]);
+    }
+  }
+  tiles_ = std::move(next);
+  tx0_ = nx0;
+  ty0_ = ny0;
+  ntx_ = nx1 - nx0;
+  nty_ = ny1 - ny0;
+}
+
+Tile* TiledGrid::MutableTile(int tx, int ty) {
+  int ix = tx - tx0_, iy = ty - ty0_;
+  if (ix < 0 || iy < 0 || ix >= ntx_ || iy >= nty_) {
+    Grow(tx, ty);
+    ix = tx - tx0_;
+    iy = ty - ty0_;
+  }
+  std::shared_ptr<Tile>& slot = tiles_[static_cast<size_t>(iy) * ntx_ + ix];
+  if (!slot) {
+    slot = std::make_shared<Tile>(*empty_);
+  } else if (slot.use_count() > 1) {
+    slot = std::make_shared<Tile>(*slot);  // copy on write
+  }
+  return slot.get();
+}
+
+int TiledGrid::RawDist(int cx, int cy) const {
+  const Tile* t = TileAt(cx >> kTileBits, cy >> kTileBits);
+  return t ? t->dist[LocalIndex(cx, cy)] : dist_max_;
+}
+
+void TiledGrid::SetRawDist(int cx, int cy, int value) {
+  Tile* t = MutableTile(cx >> kTileBits, cy >> kTileBits);
+  t->dist[LocalIndex(cx, cy)] = static_cast<uint8_t>(value);
+}
+
+float TiledGrid::LogOdds(int cx, int cy) const {
+  const Tile* t = TileAt(cx >> kTileBits, cy >> kTileBits);
+  return t ? t->log_odds[LocalIndex(cx, cy)] / kLogOddsScale : 0.0f;
+}
+
+bool TiledGrid::IsOccupied(int cx, int cy) const {
+  const Tile* t = TileAt(cx >> kTileBits, cy >> kTileBits);
+  return t && t->log_odds[LocalIndex(cx, cy)] > occ_threshold_;
+}
+
+double TiledGrid::CellDistance(int cx, int cy) const {
+  return RawDist(cx, cy) * (res_ / kDistScale);
+}
+
+const Tile* TiledGrid::TileAddress(int cx, int cy) const {
+  return TileAt(cx >> kTileBits, cy >> kTileBits);
+}
+
+void TiledGrid::UpdateCell(int cx, int cy, int delta_scaled) {
+  Tile* t = MutableTile(cx >> kTileBits, cy >> kTileBits);
+  int16_t& l = t->log_odds[LocalIndex(cx, cy)];
+  const bool was = l > occ_threshold_;
+  int v = l + delta_scaled;
+  v = std::max<int>(-clamp_, std::min<int>(clamp_, v));
+  if (v == 0) v = delta_scaled > 0 ? 1 : -1;  // 0 means "unknown": an observed cell never is
+  l = static_cast<int16_t>(v);
+  const bool now = v > occ_threshold_;
+  if (now != was) {
+    t->occupied += now ? 1 : -1;
+    if (now) {
+      OnBecameOccupied(cx, cy);
+    } else {
+      OnBecameFree(cx, cy);
+    }
+  }
+}
+
+void TiledGrid::OnBecameOccupied(int cx, int cy) {
+  for (const Offset& o : disk_) {
+    const int x = cx + o.dx, y = cy + o.dy;
+    if (RawDist(x, y) > o.d) SetRawDist(x, y, o.d);
+  }
+}
+
+void TiledGrid::OnBecameFree(int cx, int cy) {
+  // Recompute the field inside the radius from the obstacles within twice the radius.
+  std::vector<std::pair<int, int>> obstacles;
+  const int r2 = 2 * radius_;
+  for (int y = cy - r2; y <= cy + r2; ++y) {
+    for (int x = cx - r2; x <= cx + r2; ++x) {
+      if (IsOccupied(x, y)) obstacles.emplace_back(x, y);
+    }
+  }
+  for (const Offset& o : disk_) {
+    const int x = cx + o.dx, y = cy + o.dy;
+    if (RawDist(x, y) == dist_max_) continue;  // saturated: removing an obstacle cannot lower it
+    int best = dist_max_;
+    for (const auto& ob : obstacles) {
+      const int ddx = ob.first - x, ddy = ob.second - y;
+      if (std::abs(ddx) > radius_ || std::abs(ddy) > radius_) continue;
+      const int d = static_cast<int>(std::lround(std::sqrt(ddx * ddx + ddy * ddy) * kDistScale));
+      best = std::min(best, d);
+    }
+    if (best != RawDist(x, y)) SetRawDist(x, y, best);
+  }
+}
+
+void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
+                              const std::vector<Eigen::Vector2d>& endpoints_world,
+                              const std::vector<uint8_t>& is_hit) {
+  const int ox = static_cast<int>(std::floor(origin_world.x() * inv_res_));
+  const int oy = static_cast<int>(std::floor(origin_world.y() * inv_res_));
+  const int step = std::max(1, opt_.free_space_beam_step);
+  // Free space first for all beams, then the hits, so that a grazing ray of this scan does not
+  // erase a wall cell another beam of the same scan hits.
+  for (size_t k = 0; k < endpoints_world.size(); k += step) {
+    const int ex = static_cast<int>(std::floor(endpoints_world[k].x() * inv_res_));
+    const int ey = static_cast<int>(std::floor(endpoints_world[k].y() * inv_res_));
+    // Bresenham from (ox, oy) to (ex, ey), excluding the end cell of a hit.
+    int x = ox, y = oy;
+    const int dx = std::abs(ex - ox), dy = -std::abs(ey - oy);
+    const int sx = ox < ex ? 1 : -1, sy = oy < ey ? 1 : -1;
+    int err = dx + dy;
+    int ctx = INT32_MIN, cty = INT32_MIN;
+    Tile* tile = nullptr;
+    while (true) {
+      const bool at_end = (x == ex && y == ey);
+      if (at_end && is_hit[k]) break;
+      const int tx = x >> kTileBits, ty = y >> kTileBits;
+      if (tx != ctx || ty != cty) {
+        tile = MutableTile(tx, ty);
+        ctx = tx;
+        cty = ty;
+      }
+      int16_t& l = tile->log_odds[LocalIndex(x, y)];
+      const bool was = l > occ_threshold_;
+      int v = std::max<int>(-clamp_, l + miss_);
+      if (v == 0) v = -1;
+      l = static_cast<int16_t>(v);
+      if (was && v <= occ_threshold_) {
+        tile->occupied -= 1;
+        OnBecameFree(x, y);
+      }
+      if (at_end) break;
+      const int e2 = 2 * err;
+      if (e2 >= dy) {
+        err += dy;
+        x += sx;
+      }
+      if (e2 <= dx) {
+        err += dx;
+        y += sy;
+      }
+    }
+  }
+  for (size_t k = 0; k < endpoints_world.size(); ++k) {
+    if (!is_hit[k]) continue;
+    UpdateCell(static_cast<int>(std::floor(endpoints_world[k].x() * inv_res_)),
+               static_cast<int>(std::floor(endpoints_world[k].y() * inv_res_)), hit_);
+  }
+}
+
+double TiledGrid::Distance(const Eigen::Vector2d& p, Eigen::Vector2d* gradient) const {
+  const double u = p.x() * inv_res_ - 0.5, v = p.y() * inv_res_ - 0.5;
+  const double fu = std::floor(u), fv = std::floor(v);
+  const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
+  const double a = u - fu, b = v - fv;
+  double d00, d10, d01, d11;
+  const Tile* t = TileAt(x0 >> kTileBits, y0 >> kTileBits);
+  if (((x0 + 1) & (kTileSize - 1)) != 0 && ((y0 + 1) & (kTileSize - 1)) != 0) {
+    // All four cells in one tile (the common case).
+    if (!t) {
+      if (gradient) gradient->setZero();
+      return opt_.field_max_distance;
+    }
+    const int i = LocalIndex(x0, y0);
+    d00 = t->dist[i];
+    d10 = t->dist[i + 1];
+    d01 = t->dist[i + kTileSize];
+    d11 = t->dist[i + kTileSize + 1];
+  } else {
+    d00 = RawDist(x0, y0);
+    d10 = RawDist(x0 + 1, y0);
+    d01 = RawDist(x0, y0 + 1);
+    d11 = RawDist(x0 + 1, y0 + 1);
+  }
+  const double scale = res_ / kDistScale;
+  const double d = ((1 - a) * (1 - b) * d00 + a * (1 - b) * d10 + (1 - a) * b * d01 + a * b * d11);
+  if (gradient) {
+    if (d * scale >= opt_.field_max_distance) {
+      gradient->setZero();
+      return opt_.field_max_distance;
+    }
+    const double gu = (1 - b) * (d10 - d00) + b * (d11 - d01);
+    const double gv = (1 - a) * (d01 - d00) + a * (d11 - d10);
+    *gradient = Eigen::Vector2d(gu, gv) * (scale * inv_res_);
+  }
+  return std::min(d * scale, opt_.field_max_distance);
+}
+
+bool TiledGrid::Bounds(int* min_cx, int* min_cy, int* max_cx, int* max_cy) const {
+  int tx_min = INT32_MAX, ty_min = INT32_MAX, tx_max = INT32_MIN, ty_max = INT32_MIN;
+  for (int iy = 0; iy < nty_; ++iy) {
+    for (int ix = 0; ix < ntx_; ++ix) {
+      if (!tiles_[static_cast<size_t>(iy) * ntx_ + ix]) continue;
+      tx_min = std::min(tx_min, ix + tx0_);
+      ty_min = std::min(ty_min, iy + ty0_);
+      tx_max = std::max(tx_max, ix + tx0_);
+      ty_max = std::max(ty_max, iy + ty0_);
+    }
+  }
+  if (tx_min == INT32_MAX) return false;
+  *min_cx = tx_min * kTileSize;
+  *min_cy = ty_min * kTileSize;
+  *max_cx = (tx_max + 1) * kTileSize;
+  *max_cy = (ty_max + 1) * kTileSize;
+  return true;
+}
+
+int TiledGrid::NumTiles() const {
+  int n = 0;
+  for (const auto& t : tiles_) n += t ? 1 : 0;
+  return n;
+}
+
+int TiledGrid::NumSharedTiles() const {
+  int n = 0;
+  for (const auto& t : tiles_) n += (t && t.use_count() > 1) ? 1 : 0;
+  return n;
+}
+
+}  // namespace fl::rbpf

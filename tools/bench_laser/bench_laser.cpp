@@ -1,0 +1,287 @@
+// fl-bench-laser: the laser RBPF-SLAM (fl::rbpf::RbpfSlam) on the CARMEN logs.
+//
+// Every input goes through the real data path: the CARMEN log is converted to an LCM log by
+// fl::importers::ConvertCarmen (corrected logs get the importer's seeded synthetic odometry
+// noise and a GROUND_TRUTH channel), the LASER / ODOMETRY messages of that LCM log are decoded,
+// odometry is interpolated at each scan's time and fed with the scan to RbpfSlam::AddScan
+// (only AddScan is timed). The final trajectory (pose graph keyframes + the filter's motion
+// since them) is compared with GROUND_TRUTH: ATE RMSE after SE(2) alignment, RPE over
+// consecutive scan pairs. The raw mit-csail.clf is compared with csail-corrected.log.gz, whose
+// scans get the raw log's time stamps by matching ranges (CarmenOptions::timestamps_from).
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <unistd.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "bot_core/planar_lidar_t.hpp"
+#include "bot_core/pose_t.hpp"
+#include "fusionloc/bench/bench.hpp"
+#include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/command_line.hpp"
+#include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/eval/metrics.hpp"
+#include "fusionloc/importers/carmen.hpp"
+#include "fusionloc/rbpf_slam/odometry_buffer.hpp"
+#include "fusionloc/rbpf_slam/rbpf_slam.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Input {
+  std::string name;
+  std::string log;        // CARMEN log to run
+  std::string reference;  // CARMEN log whose GROUND_TRUTH is the reference ("" = log itself)
+};
+
+struct LogData {
+  std::vector<fl::rbpf::LaserScan> scans;
+  fl::rbpf::OdometryBuffer odom{std::numeric_limits<int64_t>::max() / 4,
+                                5 * fl::kUtimePerSecond};
+  fl::eval::Trajectory ground_truth;
+};
+
+template <class Msg>
+bool Decode(const fl::LcmLogEvent& ev, Msg* msg) {
+  return msg->decode(ev.data.data(), 0, static_cast<int>(ev.data.size())) >= 0;
+}
+
+LogData ReadLcm(const std::string& path) {
+  LogData d;
+  fl::LcmLogReader reader(path);
+  fl::LcmLogEvent ev;
+  while (reader.Next(&ev)) {
+    if (ev.channel == fl::channels::kLaser) {
+      bot_core::planar_lidar_t m{};
+      if (!Decode(ev, &m)) continue;
+      fl::rbpf::LaserScan s;
+      s.utime = m.utime;
+      s.ranges = m.ranges;
+      s.rad0 = m.rad0;
+      s.radstep = m.radstep;
+      d.scans.push_back(std::move(s));
+    } else if (ev.channel == fl::channels::kOdometry) {
+      fusionloc::wheel_odometry_t m{};
+      if (!Decode(ev, &m)) continue;
+      (void)d.odom.Add(m.utime, fl::Pose2(m.x, m.y, m.theta));  // repeated stamps: first wins
+    } else if (ev.channel == fl::channels::kGroundTruth) {
+      bot_core::pose_t m{};
+      if (!Decode(ev, &m)) continue;
+      fl::eval::StampedPose p;
+      p.utime = m.utime;
+      p.T_world_base = fl::IsometryFromArrays(m.pos, m.orientation);
+      if (!d.ground_truth.empty() && p.utime <= d.ground_truth.back().utime) continue;
+      d.ground_truth.push_back(p);
+    }
+  }
+  return d;
+}
+
+// Map (grey), reference (green) and estimate (red) in the map frame.
+void WritePng(const fl::rbpf::TiledGrid& map, const fl::eval::Trajectory& est,
+              const fl::eval::Trajectory& ref_in_map, const std::string& path) {
+  int x0, y0, x1, y1;
+  if (!map.Bounds(&x0, &y0, &x1, &y1)) return;
+  const int w = x1 - x0, h = y1 - y0;
+  cv::Mat img(h, w, CV_8UC3, cv::Scalar(200, 200, 200));
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      const float l = map.LogOdds(x, y);
+      if (l == 0.0f) continue;
+      const double p = 1.0 - 1.0 / (1.0 + std::exp(l));
+      const uint8_t v = static_cast<uint8_t>(255.0 * (1.0 - p));
+      img.at<cv::Vec3b>(y1 - 1 - y, x - x0) = cv::Vec3b(v, v, v);
+    }
+  }
+  const double res = map.resolution();
+  auto px = [&](const Eigen::Vector3d& p) {
+    return cv::Point(static_cast<int>(p.x() / res) - x0, y1 - 1 - static_cast<int>(p.y() / res));
+  };
+  for (size_t i = 1; i < ref_in_map.size(); ++i) {
+    cv::line(img, px(ref_in_map[i - 1].T_world_base.translation()),
+             px(ref_in_map[i].T_world_base.translation()), cv::Scalar(0, 160, 0), 2);
+  }
+  for (size_t i = 1; i < est.size(); ++i) {
+    cv::line(img, px(est[i - 1].T_world_base.translation()), px(est[i].T_world_base.translation()),
+             cv::Scalar(0, 0, 220), 1);
+  }
+  fs::create_directories(fs::path(path).parent_path());
+  cv::imwrite(path, img);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  fl::CommandLine cli("fl-bench-laser",
+                      "Runs the laser RBPF-SLAM on the CARMEN logs of DATA/laser (raw mit-csail.clf "
+                      "against csail-corrected.log.gz; every *-corrected log with the importer's "
+                      "seeded synthetic odometry noise against its own poses; any other CARMEN log "
+                      "(.clf, .log, .log.gz) likewise) and reports ATE (SE(2)-aligned), RPE over "
+                      "consecutive scans, ms per scan (AddScan only, one core) and peak memory, "
+                      "and writes a PNG of each map with both trajectories.");
+  fl::bench::CommonArgs args;
+  fl::bench::AddCommonFlags(&cli, &args, "laser");
+  std::string config;
+  std::string only;
+  std::string png_dir = "out/bench/laser";
+  int particles = 0;
+  uint64_t seed = 1;
+  cli.AddFlag("config", &config, "RBPF options YAML (default: built-in defaults = config/rbpf_slam.yaml)");
+  cli.AddFlag("only", &only, "run only logs whose file name contains this text");
+  cli.AddFlag("particles", &particles, "override the particle count (0 = from the options)");
+  cli.AddFlag("noise-seed", &seed, "seed of the synthetic odometry noise of corrected logs");
+  cli.AddFlag("png-dir", &png_dir, "folder for the map PNGs");
+  bool dump = false;
+  cli.AddFlag("dump", &dump, "also write the estimate and reference trajectories (TUM) next to the PNGs");
+  if (!cli.Parse(argc, argv)) return cli.exit_code();
+
+  fl::rbpf::RbpfSlamOptions options;
+  try {
+    if (!config.empty()) options = fl::LoadYamlFile<fl::rbpf::RbpfSlamOptions>(config);
+  } catch (const std::exception& e) {
+    std::cerr << "fl-bench-laser: " << e.what() << "\n";
+    return 2;
+  }
+  if (particles > 0) options.particles = particles;
+
+  // Inputs: DATA/laser and (if different) the shared data folder's laser logs.
+  std::vector<Input> inputs;
+  const fs::path dir = fs::path(args.data_dir) / "laser";
+  std::vector<fs::path> files;
+  std::error_code ec;
+  for (fs::directory_iterator it(fs::is_directory(dir) ? dir : fs::path(args.data_dir), ec), end;
+       !ec && it != end; it.increment(ec)) {
+    const std::string n = it->path().filename().string();
+    if (n.size() > 4 && (n.rfind(".clf") == n.size() - 4 || n.find(".log") != std::string::npos)) {
+      files.push_back(it->path());
+    }
+  }
+  std::sort(files.begin(), files.end());
+  for (const fs::path& f : files) {
+    std::string n = f.filename().string();
+    if (!only.empty() && n.find(only) == std::string::npos) continue;
+    Input in;
+    in.log = f.string();
+    in.name = n.substr(0, n.find('.'));
+    if (n == "mit-csail.clf") {
+      const fs::path ref = f.parent_path() / "csail-corrected.log.gz";
+      if (!fs::exists(ref)) {
+        std::cerr << "fl-bench-laser: skipping " << f << ": its reference " << ref << " is missing\n";
+        continue;
+      }
+      in.reference = ref.string();
+      in.name = "mit-csail-raw";
+    }
+    inputs.push_back(in);
+  }
+  if (inputs.empty()) {
+    std::cerr << "fl-bench-laser: no CARMEN logs (.clf, .log, .log.gz) in " << dir
+              << (only.empty() ? "" : " matching --only " + only) << "; pass --data DIR\n";
+    return 2;
+  }
+
+  fl::bench::Report report("laser");
+  const std::string tmp = (fs::temp_directory_path() / ("fl_bench_laser_" + std::to_string(getpid()))).string();
+  fs::create_directories(tmp);
+  int failures = 0;
+  for (const Input& in : inputs) {
+    try {
+      fl::importers::CarmenOptions co;
+      co.seed = seed;
+      const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
+      if (!in.reference.empty()) co.noisy_odometry = "false";
+      fl::importers::ConvertCarmen(co, in.log, lcm_log);
+      LogData data = ReadLcm(lcm_log);
+      if (!in.reference.empty()) {
+        fl::importers::CarmenOptions ro;
+        ro.noisy_odometry = "true";
+        ro.timestamps_from = in.log;
+        const std::string ref_log = tmp + "/" + in.name + ".ref.lcmlog";
+        fl::importers::ConvertCarmen(ro, in.reference, ref_log);
+        data.ground_truth = ReadLcm(ref_log).ground_truth;
+      }
+      if (data.ground_truth.size() < 3) throw std::runtime_error("fewer than 3 ground-truth poses");
+
+      fl::rbpf::RbpfSlam slam(options);
+      std::vector<double> ms_processed, ms_all;
+      int64_t skipped = 0;
+      fl::bench::Progress progress("[bench laser] " + in.name, static_cast<int64_t>(data.scans.size()));
+      for (size_t i = 0; i < data.scans.size(); ++i) {
+        fl::Pose2 odom;
+        if (!data.odom.Lookup(data.scans[i].utime, &odom).ok()) {
+          ++skipped;
+          continue;
+        }
+        fl::rbpf::ScanResult r;
+        const auto t0 = std::chrono::steady_clock::now();
+        const fl::Status s = slam.AddScan(data.scans[i], odom, &r);
+        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        if (!s.ok()) {
+          ++skipped;
+          continue;
+        }
+        ms_all.push_back(ms);
+        if (r.processed) ms_processed.push_back(ms);
+        progress.Update(static_cast<int64_t>(i + 1));
+      }
+      const auto t0 = std::chrono::steady_clock::now();
+      slam.Finish();
+      const double finish_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      progress.Finish();
+
+      fl::eval::Trajectory est;
+      for (const auto& p : slam.Trajectory()) est.push_back({p.utime, p.T_world_base.ToIsometry3()});
+      const fl::Utime max_dt = 20000;
+      const fl::eval::AteResult ate = fl::eval::ComputeAte(est, data.ground_truth, fl::eval::Alignment::kSE2, max_dt);
+      const fl::eval::RpeResult rpe = fl::eval::ComputeRpe(est, data.ground_truth, 1, fl::eval::DeltaUnit::kFrames, max_dt);
+      const fl::bench::Stats sp = fl::bench::ComputeStats(ms_processed);
+      const fl::bench::Stats sa = fl::bench::ComputeStats(ms_all);
+      fl::bench::Run run;
+      run.name = in.name;
+      run.input = in.log;
+      const auto& st = slam.stats();
+      run.Add("ate_rmse_m", ate.trans_m.rmse)
+          .Add("ate_rmse_deg", ate.rot_deg.rmse)
+          .Add("rpe_trans_m", rpe.trans_m.mean)
+          .Add("rpe_rot_deg", rpe.rot_deg.mean)
+          .Add("ms_per_item_mean", sa.mean)
+          .Add("ms_per_item_p95", sa.p95)
+          .Add("ms_per_processed_mean", sp.mean)
+          .Add("ms_per_processed_p95", sp.p95)
+          .Add("finish_ms", finish_ms)
+          .Add("items", static_cast<double>(ms_all.size()))
+          .Add("processed", static_cast<double>(st.processed))
+          .Add("matched_pairs", static_cast<double>(ate.trans_m.count))
+          .Add("loop_closures", static_cast<double>(st.loop_closures))
+          .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
+          .Add("resamples", static_cast<double>(st.resamples))
+          .Add("dropped", static_cast<double>(skipped))
+          .Add("peak_rss_mb", fl::bench::PeakRssMb());
+      const std::string png = png_dir + "/" + in.name + ".png";
+      fl::eval::Trajectory ref_in_map;
+      const Eigen::Isometry3d T_est_ref = ate.T_ref_est.inverse();
+      for (const auto& p : ate.ref_matched) ref_in_map.push_back({p.utime, T_est_ref * p.T_world_base});
+      WritePng(slam.BestMap(), est, ref_in_map, png);
+      if (dump) {
+        fl::eval::WriteTrajectoryTum(est, png_dir + "/" + in.name + ".est.tum");
+        fl::eval::WriteTrajectoryTum(data.ground_truth, png_dir + "/" + in.name + ".ref.tum");
+      }
+      run.note = "png " + png + "; particles " + std::to_string(options.particles) +
+                 "; ICP factors failed " + std::to_string(st.icp_failures) +
+                 "; ms_per_item = every scan, ms_per_processed = scans the filter ran on";
+      report.AddRun(run);
+    } catch (const std::exception& e) {
+      std::cerr << "fl-bench-laser: " << in.name << ": " << e.what() << "\n";
+      ++failures;
+    }
+  }
+  if (!std::getenv("FL_BENCH_KEEP_TMP")) fs::remove_all(tmp, ec);
+  fl::bench::Publish(report, args);
+  return failures == 0 ? 0 : 1;
+}
