@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <sstream>
 
 #include "bot_core/planar_lidar_t.hpp"
 #include "bot_core/pose_t.hpp"
@@ -192,9 +193,9 @@ TEST(CarmenTest, CorrectedDetectionByNameOrOption) {
 
 TEST(CarmenTest, RawLogKeepsOdomLinesInFileOrder) {
   TempDir dir;
-  std::string text = fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.0, 1, 2, 0.1);
+  std::string text = fl::test::CarmenFlaser(5, 1.0, 1, 2, 0.1, 10.0);
   text += "ODOM 1.5 2.5 0.2 0.3 0.05 0 10.05 host 10.05\n";
-  text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.1, 2, 3, 0.3);
+  text += fl::test::CarmenFlaser(5, 1.0, 2, 3, 0.3, 10.1);
   fl::test::WriteText(dir.file("small.log"), text);
   const ConvertSummary s =
       ConvertCarmen(CarmenOptions{}, dir.file("small.log"), dir.file("o.lcmlog"));
@@ -222,6 +223,62 @@ TEST(CarmenTest, RawLogKeepsOdomLinesInFileOrder) {
       ConvertCarmen(CarmenOptions{}, dir.file("back.log"), dir.file("b.lcmlog"));
   ASSERT_EQ(b.warnings.size(), 1u);
   EXPECT_NE(b.warnings[0].find("1 ODOM lines have a time stamp earlier"), std::string::npos);
+
+  // x y theta drifting away from the odometry: a localised pose, flagged.
+  std::string loc = fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.0, 0, 0, 0);
+  loc += fl::test::CarmenFlaser(5, 1.0, 1.0, 0, 0, 10.1, 1.1, 0, 0.02);
+  fl::test::WriteText(dir.file("loc.log"), loc);
+  const ConvertSummary l =
+      ConvertCarmen(CarmenOptions{}, dir.file("loc.log"), dir.file("l.lcmlog"));
+  ASSERT_EQ(l.warnings.size(), 1u);
+  EXPECT_NE(l.warnings[0].find("localised or corrected pose"), std::string::npos);
+  EXPECT_TRUE(l.notes.empty());
+}
+
+// ROBOTLASER1 with n beams, m remissions, laser 0.2 m ahead of the robot.
+std::string RobotLaser(int n, int m, double robot_x, double t) {
+  std::ostringstream ss;
+  ss << "ROBOTLASER1 0 -1.5 3.0 0.01 30 0.01 0 " << n;
+  for (int i = 0; i < n; ++i) ss << " " << 1.0 + 0.1 * i;
+  ss << " " << m;
+  for (int i = 0; i < m; ++i) ss << " " << 10 * i;
+  ss << " " << robot_x + 0.2 << " 0 0 " << robot_x << " 0 0 0.5 0 0.1 0.1 0 " << t << " host " << t
+     << "\n";
+  return ss.str();
+}
+
+TEST(CarmenTest, RobotLaser1Lines) {
+  TempDir dir;
+  fl::test::WriteText(dir.file("rl.log"), RobotLaser(4, 4, 0.0, 5.0) + RobotLaser(4, 0, 1.0, 5.5));
+  const ConvertSummary s = ConvertCarmen(CarmenOptions{}, dir.file("rl.log"), dir.file("o.lcmlog"));
+  EXPECT_EQ(s.messages.at(channels::kLaser), 2);
+  ASSERT_EQ(s.notes.size(), 1u);
+  EXPECT_NE(s.notes[0].find("(0.2 m, 0 m, 0 rad)"), std::string::npos) << s.notes[0];
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  const auto scan = log.Decode<bot_core::planar_lidar_t>(channels::kLaser, 0);
+  EXPECT_FLOAT_EQ(scan.rad0, -1.5f);
+  EXPECT_FLOAT_EQ(scan.radstep, 0.01f);
+  ASSERT_EQ(scan.nranges, 4);
+  EXPECT_FLOAT_EQ(scan.ranges[3], 1.3f);
+  ASSERT_EQ(scan.nintensities, 4);
+  EXPECT_FLOAT_EQ(scan.intensities[2], 20.0f);
+  EXPECT_EQ(log.Decode<bot_core::planar_lidar_t>(channels::kLaser, 1).nintensities, 0);
+  const auto odo = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, 1);
+  EXPECT_DOUBLE_EQ(odo.x, 1.0);  // the robot pose, not the laser pose
+  EXPECT_NEAR(odo.v, 2.0, 1e-9);
+  EXPECT_EQ(odo.utime, 5500000);
+
+  // Cut short, and mixed with FLASER lines: errors naming the file (and line).
+  const std::string cut = RobotLaser(4, 4, 0.0, 5.0);
+  fl::test::WriteText(dir.file("cut.log"), RobotLaser(4, 4, 0.0, 4.0) + cut.substr(0, 40) + "\n");
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("cut.log"), dir.file("p.lcmlog"));
+  EXPECT_NE(msg.find("cut.log:2: truncated ROBOTLASER1 line"), std::string::npos) << msg;
+  fl::test::WriteText(dir.file("mixed.log"),
+                      RobotLaser(4, 4, 0.0, 4.0) + fl::test::CarmenFlaser(4, 1, 0, 0, 0, 4.0));
+  const std::string msg2 =
+      ExpectConvertError(CarmenOptions{}, dir.file("mixed.log"), dir.file("p.lcmlog"));
+  EXPECT_NE(msg2.find("both FLASER (1) and ROBOTLASER1 (1)"), std::string::npos) << msg2;
 }
 
 TEST(CarmenTest, LoggerTimestampOption) {
@@ -375,7 +432,7 @@ TEST(CarmenBadInputTest, EmptyFileAndMissingFile) {
   fl::test::WriteText(dir.file("empty.log"), "");
   const std::string msg =
       ExpectConvertError(CarmenOptions{}, dir.file("empty.log"), dir.file("o.lcmlog"));
-  EXPECT_NE(msg.find("empty.log: no FLASER line"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("empty.log: no FLASER or ROBOTLASER1 line"), std::string::npos) << msg;
   fl::test::WriteText(dir.file("params.log"), "PARAM a 1 h 0\nPARAM b 2 h 0\n");
   const std::string msg2 =
       ExpectConvertError(CarmenOptions{}, dir.file("params.log"), dir.file("o.lcmlog"));

@@ -213,6 +213,7 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
   log.path = path;
   LineReader reader(path);
   std::string text;
+  int64_t flaser_lines = 0, robotlaser_lines = 0;
   while (reader.Next(&text)) {
     const int64_t line = reader.line_number();
     const std::vector<std::string> t = Tokenize(text);
@@ -260,6 +261,68 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
       s.utime = SecondsToUtime(use_ipc ? s.ipc_timestamp : s.logger_timestamp);
       s.radstep = static_cast<float>(CarmenBeamStep(static_cast<int>(n), fov));
       s.rad0 = static_cast<float>(-0.5 * fov);
+      ++flaser_lines;
+      log.order.push_back({true, log.scans.size()});
+      log.scans.push_back(std::move(s));
+    } else if (type == "ROBOTLASER1") {
+      // 1 + 7 header fields, n, ranges, m, remissions, 6 poses, 5 robot fields, 3 stamps.
+      const char* kFormat =
+          " (ROBOTLASER1 laser_type start_angle fov angular_resolution max_range accuracy "
+          "remission_mode n r_1..r_n m e_1..e_m laser_x laser_y laser_theta robot_x robot_y "
+          "robot_theta laser_tv laser_rv forward_safety_dist side_safety_dist turn_axis "
+          "ipc_timestamp hostname logger_timestamp)";
+      auto count_at = [&](size_t k, const char* what) -> size_t {
+        if (t.size() <= k) {
+          LineError(path, line,
+                    "truncated ROBOTLASER1 line: only " + std::to_string(t.size()) + " fields" +
+                        kFormat + "; repair or delete the line");
+        }
+        char* end = nullptr;
+        const long v = std::strtol(t[k].c_str(), &end, 10);
+        if (*end != '\0' || v < 0 || v > 100000) {
+          LineError(path, line,
+                    std::string("ROBOTLASER1 ") + what + " '" + t[k] +
+                        "' is not an integer in [0, 100000]");
+        }
+        return static_cast<size_t>(v);
+      };
+      const size_t n = count_at(8, "beam count");
+      if (n == 0) LineError(path, line, "ROBOTLASER1 line with 0 beams");
+      const size_t m = count_at(9 + n, "remission count");
+      const size_t expected = n + m + 24;
+      if (t.size() != expected) {
+        LineError(path, line,
+                  std::string(t.size() < expected ? "truncated ROBOTLASER1 line"
+                                                  : "ROBOTLASER1 line too long") +
+                      ": n = " + std::to_string(n) + " beams and m = " + std::to_string(m) +
+                      " remissions need " + std::to_string(expected) + " fields, found " +
+                      std::to_string(t.size()) + kFormat);
+      }
+      const auto num = [&](size_t k, const char* field) {
+        return ParseNumber(t[k], field, "ROBOTLASER1", path, line);
+      };
+      CarmenScan s;
+      s.line = line;
+      s.rad0 = static_cast<float>(num(2, "start_angle"));
+      s.radstep = static_cast<float>(num(4, "angular_resolution"));
+      if (!(std::abs(s.radstep) > 0.0f)) {
+        LineError(path, line, "ROBOTLASER1 angular_resolution is 0");
+      }
+      s.ranges.resize(n);
+      for (size_t i = 0; i < n; ++i) s.ranges[i] = static_cast<float>(num(9 + i, "range"));
+      if (m == n) {  // remissions per beam become intensities; any other count is dropped
+        s.intensities.resize(m);
+        for (size_t i = 0; i < m; ++i) {
+          s.intensities[i] = static_cast<float>(num(10 + n + i, "remission"));
+        }
+      }
+      const size_t k = 10 + n + m;
+      s.pose = Pose2(num(k, "laser_x"), num(k + 1, "laser_y"), num(k + 2, "laser_theta"));
+      s.odom = Pose2(num(k + 3, "robot_x"), num(k + 4, "robot_y"), num(k + 5, "robot_theta"));
+      s.ipc_timestamp = num(k + 11, "ipc_timestamp");
+      s.logger_timestamp = num(k + 13, "logger_timestamp");
+      s.utime = SecondsToUtime(use_ipc ? s.ipc_timestamp : s.logger_timestamp);
+      ++robotlaser_lines;
       log.order.push_back({true, log.scans.size()});
       log.scans.push_back(std::move(s));
     } else if (type == "ODOM") {
@@ -288,13 +351,19 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
     }
   }
   log.lines = reader.line_number();
+  if (flaser_lines > 0 && robotlaser_lines > 0) {
+    throw std::runtime_error(path + ": has both FLASER (" + std::to_string(flaser_lines) +
+                             ") and ROBOTLASER1 (" + std::to_string(robotlaser_lines) +
+                             ") lines, usually the same scans twice; keep one kind (e.g. grep "
+                             "-v '^FLASER')");
+  }
   if (log.scans.empty()) {
     std::string seen;
     for (const auto& [k, v] : log.skipped_types) seen += " " + k + " x" + std::to_string(v);
     throw std::runtime_error(
-        path + ": no FLASER line in " + std::to_string(log.lines) + " lines" +
+        path + ": no FLASER or ROBOTLASER1 line in " + std::to_string(log.lines) + " lines" +
         (seen.empty() ? std::string(" (empty file?)") : " (found:" + seen + ")") +
-        "; a CARMEN laser log with FLASER scans is needed");
+        "; a CARMEN laser log with FLASER or ROBOTLASER1 scans is needed");
   }
   return log;
 }
@@ -391,8 +460,8 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
         ReadCarmenLog(options.timestamps_from, options.timestamp, options.fov_deg);
     RecoverTimestampsByRanges(raw, options.range_match_tolerance, &log);
     summary.notes.push_back("scan time stamps taken from '" + options.timestamps_from +
-                               "' by matching ranges (" + std::to_string(log.scans.size()) +
-                               " scans matched)");
+                            "' by matching ranges (" + std::to_string(log.scans.size()) +
+                            " scans matched)");
   }
   const bool corrected = IsCorrectedCarmenLog(options, in);
 
@@ -416,8 +485,8 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
       reference[match[k]] = ref.scans[k].pose;
     }
     summary.notes.push_back("GROUND_TRUTH for " + std::to_string(match.size()) + " of " +
-                               std::to_string(log.scans.size()) + " scans from '" +
-                               options.ground_truth_from + "' (matched by ranges)");
+                            std::to_string(log.scans.size()) + " scans from '" +
+                            options.ground_truth_from + "' (matched by ranges)");
   }
 
   // Odometry per scan: the line's own (raw) or synthetic noisy (corrected).
@@ -455,7 +524,7 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
   }
   for (const auto& [type, count] : log.skipped_types) {
     summary.notes.push_back("skipped " + std::to_string(count) + " '" + type +
-                               "' lines (not converted)");
+                            "' lines (not converted)");
   }
   if (corrected && !log.odom.empty()) {
     summary.notes.push_back(
@@ -464,6 +533,29 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
   }
 
   if (!corrected) {
+    // The laser pose relative to the robot pose is the laser's mounting; LASER is in the
+    // laser frame, so a user must know it (CARMEN: robot_frontlaser_offset).
+    const Pose2 mount = log.scans[0].odom.between(log.scans[0].pose);
+    double max_change = 0.0;
+    for (const CarmenScan& sc : log.scans) {
+      const Pose2 d = mount.between(sc.odom.between(sc.pose));
+      max_change = std::max(max_change, std::hypot(d.x, d.y) + std::abs(d.theta));
+    }
+    if (max_change > 0.01) {
+      summary.warnings.push_back(
+          "x y theta is not one rigid mounting away from the odometry (their offset changes by "
+          "up to " +
+          std::to_string(max_change) +
+          " along the log): it is probably a localised or corrected pose. It is not converted; "
+          "ODOMETRY is the odometry. To use x y theta as GROUND_TRUTH, convert with "
+          "--noisy-odometry true (which replaces the odometry by synthetic noisy odometry)");
+    } else if (std::hypot(mount.x, mount.y) > 0.005 || std::abs(mount.theta) > 0.005) {
+      std::ostringstream ss;
+      ss << "the laser pose differs from the robot pose by (" << mount.x << " m, " << mount.y
+         << " m, " << mount.theta << " rad) in the robot frame: the laser's mounting. LASER is "
+         << "in the laser frame; use this as T_base_laser";
+      summary.notes.push_back(ss.str());
+    }
     int64_t odom_backwards = 0;
     Utime prev_t = 0;
     bool first = true;
@@ -528,7 +620,8 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
       scan.utime = s.utime;
       scan.nranges = static_cast<int32_t>(s.ranges.size());
       scan.ranges = s.ranges;
-      scan.nintensities = 0;
+      scan.intensities = s.intensities;
+      scan.nintensities = static_cast<int32_t>(s.intensities.size());
       scan.rad0 = s.rad0;
       scan.radstep = s.radstep;
       write(channels::kLaser, scan, s.utime);

@@ -2,12 +2,18 @@
 //
 // Input lines (one message per line, '#' starts a comment):
 //   FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ipc_timestamp hostname logger_timestamp
+//   ROBOTLASER1 laser_type start_angle fov angular_resolution max_range accuracy remission_mode
+//     n r_1..r_n m e_1..e_m laser_x laser_y laser_theta robot_x robot_y robot_theta laser_tv
+//     laser_rv forward_safety_dist side_safety_dist turn_axis ipc_timestamp hostname
+//     logger_timestamp
 //   ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp
 // Ranges in metres, poses in metres/radians, timestamps in seconds. Every other message type
-// (PARAM, SYNC, NEFF, RLASER, ...) is skipped and counted per type.
+// (PARAM, SYNC, NEFF, RLASER, RAWLASER*, ...) is skipped and counted per type. A log with
+// both FLASER and ROBOTLASER1 lines is an error (the same scans would be converted twice).
 //
 // Output channels (fusionloc/common/channels.hpp):
-//   LASER         bot_core.planar_lidar_t, one per FLASER line. CARMEN's FLASER convention:
+//   LASER         bot_core.planar_lidar_t, one per FLASER / ROBOTLASER1 line (ROBOTLASER1
+//                 gives start_angle and angular_resolution itself). CARMEN's FLASER convention:
 //                 the beams cover the 180 degree field of view counter-clockwise starting at the
 //                 robot's right, so rad0 = -pi/2; the beam spacing is CARMEN's (see
 //                 CarmenBeamStep): 0.5 deg for 361/360 beams, 1 deg for 181/180 beams,
@@ -108,12 +114,15 @@ struct CarmenOptions {
 };
 
 struct CarmenScan {
-  Utime utime = 0;                // [us] from the chosen time stamp
-  std::vector<float> ranges;      // [m]
-  float rad0 = 0.0f;              // [rad] angle of the first beam (CCW from the robot's x axis)
-  float radstep = 0.0f;           // [rad] angle between beams
-  Pose2 pose;                     // the line's x y theta (corrected pose in corrected logs)
-  Pose2 odom;                     // the line's odom_x odom_y odom_theta
+  Utime utime = 0;                 // [us] from the chosen time stamp
+  std::vector<float> ranges;       // [m]
+  float rad0 = 0.0f;               // [rad] angle of the first beam (CCW from the robot's x axis)
+  float radstep = 0.0f;            // [rad] angle between beams
+  std::vector<float> intensities;  // ROBOTLASER1 remission values (empty for FLASER)
+  // FLASER: the line's x y theta (the laser pose; the corrected pose in corrected logs) and
+  // odom_x odom_y odom_theta. ROBOTLASER1: laser_pose and robot_pose.
+  Pose2 pose;
+  Pose2 odom;
   double ipc_timestamp = 0.0;     // [s] as printed
   double logger_timestamp = 0.0;  // [s] as printed
   int64_t line = 0;               // 1-based line number in the file
