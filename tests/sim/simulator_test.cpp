@@ -127,6 +127,20 @@ TEST(SimulatorTest, InvalidOptionsCreateNoFile) {
   EXPECT_FALSE(std::filesystem::exists(dir.file("x.lcmlog.partial")));
 }
 
+TEST(SimulatorTest, FailedLogWriteLeavesNoFile) {
+  // fl-sim's Ctrl-C handling throws from the progress callback: the partial log must go.
+  test::TempDir dir;
+  SimOptions o = Short(5.0);
+  o.camera.enabled = false;
+  EXPECT_THROW(WriteLog(o, dir.file("x.lcmlog"),
+                        [](int64_t done, int64_t) {
+                          if (done == 3) throw std::runtime_error("interrupted");
+                        }),
+               std::runtime_error);
+  EXPECT_FALSE(std::filesystem::exists(dir.file("x.lcmlog")));
+  EXPECT_FALSE(std::filesystem::exists(dir.file("x.lcmlog.partial")));
+}
+
 // Runs the motion and odometry only (no rendering) for `duration_s`.
 std::vector<SimFrame> Drive(SimOptions o, double duration_s) {
   o.duration_s = duration_s;
