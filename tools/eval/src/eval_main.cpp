@@ -41,6 +41,7 @@ struct Args {
 
 std::string Num(double v, int digits = 4) {
   if (!std::isfinite(v)) return "null";
+  if (v == 0.0) v = 0.0;  // no "-0"
   std::ostringstream s;
   s << std::setprecision(digits > 6 ? digits : 10) << v;
   return s.str();

@@ -13,11 +13,21 @@
 #include <set>
 #include <sstream>
 
+#include "bot_core/image_metadata_t.hpp"
+#include "bot_core/image_t.hpp"
+#include "bot_core/images_t.hpp"
+#include "bot_core/planar_lidar_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/log.hpp"
 #include "fusionloc/fused_pose_t.hpp"
+#include "fusionloc/occupancy_grid_t.hpp"
+#include "fusionloc/point_cloud_t.hpp"
+#include "fusionloc/relative_pose_factor_t.hpp"
+#include "fusionloc/status_t.hpp"
+#include "fusionloc/stereo_calibration_t.hpp"
 #include "fusionloc/trajectory_t.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 #include "text_parse.hpp"
@@ -27,6 +37,27 @@ namespace fl::eval {
 using namespace internal;  // NOLINT: parsing helpers
 
 namespace {
+
+// Name of a project message type by fingerprint, for error messages ("" if unknown).
+std::string TypeNameOfHash(int64_t hash) {
+  static const std::map<int64_t, std::string> kNames = {
+      {bot_core::image_metadata_t::getHash(), "bot_core.image_metadata_t"},
+      {bot_core::image_t::getHash(), "bot_core.image_t"},
+      {bot_core::images_t::getHash(), "bot_core.images_t"},
+      {bot_core::planar_lidar_t::getHash(), "bot_core.planar_lidar_t"},
+      {bot_core::pose_t::getHash(), "bot_core.pose_t"},
+      {bot_core::rigid_transform_t::getHash(), "bot_core.rigid_transform_t"},
+      {fusionloc::fused_pose_t::getHash(), "fusionloc.fused_pose_t"},
+      {fusionloc::occupancy_grid_t::getHash(), "fusionloc.occupancy_grid_t"},
+      {fusionloc::point_cloud_t::getHash(), "fusionloc.point_cloud_t"},
+      {fusionloc::relative_pose_factor_t::getHash(), "fusionloc.relative_pose_factor_t"},
+      {fusionloc::status_t::getHash(), "fusionloc.status_t"},
+      {fusionloc::stereo_calibration_t::getHash(), "fusionloc.stereo_calibration_t"},
+      {fusionloc::trajectory_t::getHash(), "fusionloc.trajectory_t"},
+      {fusionloc::wheel_odometry_t::getHash(), "fusionloc.wheel_odometry_t"}};
+  const auto it = kNames.find(hash);
+  return it == kNames.end() ? "" : it->second;
+}
 
 // KITTI raw "YYYY-MM-DD HH:MM:SS.fffffffff" (UTC) or plain seconds.
 Utime ParseTimesLine(const std::string& line, const std::string& where) {
@@ -259,8 +290,9 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
     if (hash != kPoseHash && hash != kFusedHash && hash != kTrajHash && hash != kOdomHash) {
       std::ostringstream h;
       h << std::hex << static_cast<uint64_t>(hash);
-      throw EvalError("channel '" + channel + "' in '" + log_path +
-                      "' carries a message type with fingerprint 0x" + h.str() +
+      const std::string type = TypeNameOfHash(hash);
+      throw EvalError("channel '" + channel + "' in '" + log_path + "' carries " +
+                      (type.empty() ? "a message type with fingerprint 0x" + h.str() : type) +
                       ", not a pose type; use a channel of type bot_core.pose_t, "
                       "fusionloc.fused_pose_t, fusionloc.wheel_odometry_t or "
                       "fusionloc.trajectory_t");
