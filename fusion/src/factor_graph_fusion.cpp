@@ -500,13 +500,7 @@ SolveSummary FactorGraphFusion::SolveWindow(int first) {
   FillSummary(s, &summary);
   summary.num_nodes = n - first;
   summary.num_factors = num_factors;
-  // Nodes of the window that no factor constrains follow their predecessor's motion.
-  for (int k = std::max(first, 1); k < n; ++k) {
-    if (!problem.HasParameterBlock(nodes_[k].state.data())) {
-      const Pose2 motion = nodes_[k - 1].T_map_base_rbpf.between(nodes_[k].T_map_base_rbpf);
-      nodes_[k].state = ToVector(ToPose2(nodes_[k - 1].state) * motion);
-    }
-  }
+  FillUnconstrained(first);
   latest_covariance_.setZero();
   double* newest = nodes_.back().state.data();
   if (options_.compute_covariance && problem.HasParameterBlock(newest) &&
@@ -581,8 +575,39 @@ void FactorGraphFusion::ApplyFullSolve(const FullSolveJob& job) {
     nodes_[k].state = ToVector(new_anchor * rel);
   }
   for (int k = 0; k < solved; ++k) nodes_[k].state = job.states_[k];
+  FillUnconstrained(0);
   ++counters_.full_solves;
   last_summary_ = job.summary_;
+}
+
+void FactorGraphFusion::FillUnconstrained(int first) {
+  const int n = num_nodes();
+  int k = std::max(first, 1);
+  while (k < n) {
+    if (!nodes_[k].factors.empty()) {
+      ++k;
+      continue;
+    }
+    // A run [k, m) of nodes without factors, between constrained nodes a = k-1 and b = m.
+    int m = k;
+    while (m < n && nodes_[m].factors.empty()) ++m;
+    const Node& a = nodes_[k - 1];
+    for (int q = k; q < m; ++q) {
+      const Pose2 fwd = ToPose2(a.state) * a.T_map_base_rbpf.between(nodes_[q].T_map_base_rbpf);
+      if (m == n) {
+        nodes_[q].state = ToVector(fwd);
+        continue;
+      }
+      const Node& b = nodes_[m];
+      const Pose2 bwd = ToPose2(b.state) * b.T_map_base_rbpf.between(nodes_[q].T_map_base_rbpf);
+      const double alpha = static_cast<double>(nodes_[q].utime - a.utime) /
+                           static_cast<double>(b.utime - a.utime);
+      nodes_[q].state = Eigen::Vector3d(
+          (1 - alpha) * fwd.x + alpha * bwd.x, (1 - alpha) * fwd.y + alpha * bwd.y,
+          WrapAngle(fwd.theta + alpha * WrapAngle(bwd.theta - fwd.theta)));
+    }
+    k = m;
+  }
 }
 
 SolveSummary FactorGraphFusion::FullSolve() {

@@ -249,7 +249,9 @@ TEST(FusionFactorGraph, WheelOdometryFactorsLinkNodes) {
   FusionSimOptions so;
   so.loop_closure = false;
   const FusionSimData d = MakeRoundedSquareSim(so);
-  FactorGraphFusion fusion(TestOptions());
+  FusionOptions o = TestOptions();
+  o.use_wheel_odometry = true;
+  FactorGraphFusion fusion(o);
   // Odometry at 50 Hz = truth in its own frame (rotated and shifted); no other factors.
   const Pose2 T_odom_map(3.0, -2.0, 0.7);
   size_t node = 0;

@@ -50,6 +50,9 @@
 // this object keeps taking nodes and running Update()), then ApplyFullSolve() merges the
 // result: nodes solved by the job take its values, nodes added meanwhile are moved rigidly
 // with the newest solved node. Gauge: a prior on the first node (prior_sigma_*).
+// Nodes that no factor touches (e.g. laser scans between RBPF keyframes while no vision
+// factor arrives) are not optimised: after each solve they are placed by the RBPF's relative
+// motion from the constrained nodes on both sides, blended linearly in time.
 //
 // Thread safety: one thread uses the object; only FullSolveJob::Run() may run elsewhere.
 #pragma once
@@ -99,7 +102,8 @@ struct FusionOptions {
   double robust_loss_scale = 3.0;     // [sigma] whitened error where the loss bends
   double prior_sigma_xy = 0.001;      // [m] prior on the first node (gauge)
   double prior_sigma_theta = 0.001;   // [rad]
-  bool use_wheel_odometry = true;     // add odometry between-factors
+  bool use_wheel_odometry = false;    // add odometry between-factors (off: the RBPF already
+                                      // fuses the wheel odometry; on would count it twice)
   double odom_sigma_xy_min = 0.02;    // [m] odometry noise floor per node pair
   double odom_sigma_xy_per_m = 0.05;  // [m/m] odometry xy noise per metre travelled
   double odom_sigma_theta_min = 0.005;     // [rad] heading noise floor per node pair
@@ -276,6 +280,9 @@ class FactorGraphFusion {
   void AddOdometryFactors();
   bool OdometryAt(Utime t, Pose2* T_odom_base) const;
   SolveSummary SolveWindow(int first_node);
+  // Nodes (from `first` on) that no factor touches are placed by the RBPF's relative motion
+  // from the constrained nodes before and after them (blended linearly in time).
+  void FillUnconstrained(int first);
 
   FusionOptions options_;
   std::deque<Node> nodes_;
