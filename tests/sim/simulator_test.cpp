@@ -221,6 +221,22 @@ TEST(SimulatorTest, RobotStaysClearOfObstaclesAndRevisitsPlaces) {
   }
 }
 
+TEST(SimulatorTest, CorridorSizeVariantsStayClear) {
+  for (const auto& [length, width] : {std::pair{40.0, 2.0}, std::pair{40.0, 5.0},
+                                      std::pair{120.0, 3.0}}) {
+    SimOptions o = DefaultOptionsForWorld("corridor");
+    o.world.corridor_length_m = length;
+    o.world.corridor_width_m = width;
+    const std::vector<SimFrame> frames = Drive(o, 400.0);
+    Simulator sim(o);
+    double min_clear = 1e9;
+    for (const SimFrame& f : frames) {
+      min_clear = std::min(min_clear, sim.world().DistanceToObstacles(f.T_world_base.translation()));
+    }
+    EXPECT_GE(min_clear, 0.5) << "corridor " << length << " x " << width;
+  }
+}
+
 TEST(SimulatorTest, GroundTruthVelocityMatchesMotion) {
   const std::vector<SimFrame> frames = Drive(SimOptions(), 30.0);
   for (size_t k = 1; k < frames.size(); ++k) {
