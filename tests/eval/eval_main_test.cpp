@@ -5,7 +5,9 @@
 #include <fstream>
 
 #include "eval_fixtures.hpp"
+#include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/eval/trajectory.hpp"
+#include "fusionloc/occupancy_grid_t.hpp"
 #include "test_paths.hpp"
 
 namespace fl::eval {
@@ -66,6 +68,32 @@ TEST_F(EvalMain, GoodRunPrintsTableAndWritesJsonAndPlots) {
   EXPECT_NE(json.find("\"ate\": {\"trans_m\": {\"rmse\": 0.070710678"), std::string::npos) << json;
   EXPECT_TRUE(std::filesystem::exists(dir_.file("p_traj.png")));
   EXPECT_TRUE(std::filesystem::exists(dir_.file("p_errors.png")));
+}
+
+TEST_F(EvalMain, MapBackgroundUnderTopView) {
+  fusionloc::occupancy_grid_t g;
+  g.utime = 1;
+  g.resolution = 0.5;
+  g.width = 40;
+  g.height = 30;
+  g.origin_x = -12;
+  g.origin_y = -3;
+  g.num_cells = g.width * g.height;
+  g.cells.assign(static_cast<size_t>(g.num_cells), 0);
+  {
+    LcmLogWriter w(dir_.file("map.lcmlog"));
+    w.Write("RBPF_MAP", g, 1);
+    w.Close();
+  }
+  Result r = RunEval(est_ + " " + ref_ + " --plot " + dir_.file("m") + " --map-log " +
+                     dir_.file("map.lcmlog"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::exists(dir_.file("m_traj.png")));
+  r = RunEval(est_ + " " + ref_ + " --plot " + dir_.file("m") + " --map-log " +
+              dir_.file("map.lcmlog") + " --map-channel FUSED_MAP");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("map channel 'FUSED_MAP' not found"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("ATE translation"), std::string::npos) << "failed before any output";
 }
 
 TEST_F(EvalMain, RelationsWrittenFromReferenceAndEvaluated) {

@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "eval_fixtures.hpp"
+#include "fusionloc/common/lcm_interface.hpp"
 #include "test_paths.hpp"
 
 namespace fl::eval {
@@ -83,6 +84,37 @@ TEST(EvalPlot, BadInputsThrow) {
                           {Panel{"y", {SeriesCurve{"c", {1, 2}, {1}, kPlotRed}}}}),
                EvalError);
   EXPECT_THROW(PlotSeries(dir.file("s.png"), "t", "x", {}), EvalError);
+}
+
+}  // namespace
+}  // namespace fl::eval
+
+namespace fl::eval {
+namespace {
+
+TEST(EvalPlot, BackgroundGridFromLcmLog) {
+  fl::test::TempDir dir;
+  fusionloc::occupancy_grid_t g;
+  g.utime = 1;
+  g.resolution = 0.1;
+  g.width = 3;
+  g.height = 2;
+  g.origin_x = -1;
+  g.origin_y = 2;
+  g.num_cells = 6;
+  g.cells = {0, 100, -1, 50, 0, 0};
+  {
+    LcmLogWriter w(dir.file("map.lcmlog"));
+    w.Write("RBPF_MAP", g, 1);
+    w.Close();
+  }
+  const BackgroundGrid b = ReadBackgroundGridLcm(dir.file("map.lcmlog"), "RBPF_MAP");
+  EXPECT_EQ(b.width, 3);
+  EXPECT_DOUBLE_EQ(b.origin_y, 2.0);
+  EXPECT_EQ(b.cells, g.cells);
+  EXPECT_THROW(ReadBackgroundGridLcm(dir.file("map.lcmlog"), "FUSED_MAP"), EvalError);
+  g.num_cells = 5;
+  EXPECT_THROW(BackgroundFromGrid(g), EvalError);
 }
 
 }  // namespace

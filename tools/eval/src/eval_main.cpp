@@ -34,6 +34,8 @@ struct Args {
   std::string json;
   std::string plot;
   std::string plot_plane = "xy";
+  std::string map_log;
+  std::string map_channel = "RBPF_MAP";
   std::string title;
   std::string est_name = "estimate";
   std::string ref_name = "reference";
@@ -123,6 +125,9 @@ int Run(const Args& a) {
       a.est_path, a.est_channel, a.est_format.empty() ? a.format : a.est_format, a.est_times);
   const Trajectory ref = ReadTrajectory(
       a.ref_path, a.ref_channel, a.ref_format.empty() ? a.format : a.ref_format, a.ref_times);
+
+  BackgroundGrid background;  // read first, so a bad map fails before any output
+  if (!a.map_log.empty()) background = ReadBackgroundGridLcm(a.map_log, a.map_channel);
 
   const AteResult ate = ComputeAte(est, ref, alignment, max_dt);
   const RpeResult rpe = ComputeRpe(est, ref, a.rpe_delta, unit, max_dt);
@@ -265,6 +270,7 @@ int Run(const Args& a) {
       << AlignmentName(alignment) << ")";
     opt.title = t.str();
     opt.plane = a.plot_plane;
+    if (!a.map_log.empty()) opt.background = &background;
     PlotTrajectoriesTopView(a.plot + "_traj.png",
                             {{a.ref_name, ate.ref_matched, kPlotBlack},
                              {a.est_name + " (aligned)", ate.est_aligned, kPlotBlue}},
@@ -320,6 +326,9 @@ int main(int argc, char** argv) {
   cli.AddFlag("plot-plane", &a.plot_plane,
               "plane of the plots: xy (ground robot, z up) or xz (camera frames such as KITTI's "
               "poses: x right, z forward)");
+  cli.AddFlag("map-log", &a.map_log,
+              "LCM log whose last occupancy grid (--map-channel) is drawn under the top view");
+  cli.AddFlag("map-channel", &a.map_channel, "occupancy-grid channel in --map-log");
   cli.AddFlag("title", &a.title, "plot title");
   cli.AddFlag("est-name", &a.est_name, "legend name of EST");
   cli.AddFlag("ref-name", &a.ref_name, "legend name of REF");

@@ -16,6 +16,7 @@
 
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/eval/trajectory.hpp"
+#include "fusionloc/occupancy_grid_t.hpp"
 
 namespace fl::eval {
 
@@ -47,6 +48,12 @@ struct BackgroundGrid {
   int width = 0, height = 0;          // [cells]
   std::vector<int8_t> cells;
 };
+
+// Validated copy of an occupancy grid message; throws EvalError if inconsistent.
+BackgroundGrid BackgroundFromGrid(const fusionloc::occupancy_grid_t& grid);
+// The last fusionloc.occupancy_grid_t on `channel` of an LCM log (e.g. RBPF_MAP); throws
+// EvalError if the log or channel is missing or carries another type.
+BackgroundGrid ReadBackgroundGridLcm(const std::string& log_path, const std::string& channel);
 
 struct TopViewOptions {
   std::string title;
