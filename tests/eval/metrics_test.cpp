@@ -119,6 +119,28 @@ TEST(EvalAte, Se2RecoversPlanarTransformAndHeadingError) {
   EXPECT_NEAR(ComputeAte(lifted, ref, Alignment::kSE2, 1000).trans_m.rmse, 0.3, 1e-9);
 }
 
+TEST(EvalAte, Se2EqualsSe3OnNoisyPlanarData) {
+  // For points in the z = 0 plane the optimal SE(3) rotation is about z, so the 2D closed form
+  // and Umeyama must agree, also with noise (an independent check of the SE2 formula).
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.2);
+  const Trajectory ref = MakePlanarTrajectory(80, [](size_t i) {
+    const double s = 0.08 * static_cast<double>(i);
+    return Pose2(8.0 * std::cos(s), 4.0 * std::sin(2 * s), s);
+  });
+  Trajectory est = TransformTrajectory(ref, Pose2(-3.0, 2.0, 2.5).ToIsometry3());
+  for (auto& p : est) {
+    p.T_world_base.translation().x() += noise(rng);
+    p.T_world_base.translation().y() += noise(rng);
+  }
+  const AteResult se2 = ComputeAte(est, ref, Alignment::kSE2, 1000);
+  const AteResult se3 = ComputeAte(est, ref, Alignment::kSE3, 1000);
+  EXPECT_TRUE(se2.T_ref_est.isApprox(se3.T_ref_est, 1e-9));
+  EXPECT_NEAR(se2.trans_m.rmse, se3.trans_m.rmse, 1e-9);
+  EXPECT_GT(se2.trans_m.rmse, 0.15);  // the noise remains
+  EXPECT_LT(se2.trans_m.rmse, 0.4);
+}
+
 TEST(EvalAte, BadInputsGiveClearErrors) {
   const Trajectory ref = MakeHelixTrajectory(10);
   EXPECT_NE(ErrorOf([&] { ComputeAte({}, ref, Alignment::kSE3, 1000); }).find("empty"),
