@@ -15,6 +15,10 @@ if(FL_CCACHE)
   set(CMAKE_C_COMPILER_LAUNCHER ${FL_CCACHE})
 endif()
 
+# LCM 1.3.1's lcm_coretypes.h decodes doubles through int64_t pointers (type punning). With
+# strict aliasing GCC 12 at -O2 can drop the decoded values, so every target turns it off.
+add_compile_options(-fno-strict-aliasing)
+
 if(FL_SANITIZE)
   add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer)
   add_link_options(-fsanitize=address,undefined)
