@@ -21,26 +21,31 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
 }  // namespace
 
 bool SolveRigidSvd(const std::vector<Eigen::Vector3d>& p_a, const std::vector<Eigen::Vector3d>& p_b,
-                   const std::vector<int>& idx, Eigen::Isometry3d* T_a_b) {
+                   const std::vector<int>& idx, Eigen::Isometry3d* T_a_b,
+                   const std::vector<double>* weights) {
   const size_t n = idx.empty() ? p_a.size() : idx.size();
   if (n < 3 || p_a.size() != p_b.size()) return false;
-  auto at = [&](const std::vector<Eigen::Vector3d>& v, size_t k) -> const Eigen::Vector3d& {
-    return idx.empty() ? v[k] : v[static_cast<size_t>(idx[k])];
-  };
-  // Centroids (eq. 16), cross-covariance H = sum (p_b - mu_b)(p_a - mu_a)^T (eq. 17).
+  if (weights != nullptr && weights->size() != p_a.size()) return false;
+  auto index = [&](size_t k) { return idx.empty() ? k : static_cast<size_t>(idx[k]); };
+  auto weight = [&](size_t k) { return weights == nullptr ? 1.0 : (*weights)[index(k)]; };
+  // Centroids (eq. 16), cross-covariance H = sum w (p_b - mu_b)(p_a - mu_a)^T (eq. 17).
   Eigen::Vector3d mu_a = Eigen::Vector3d::Zero(), mu_b = Eigen::Vector3d::Zero();
+  double wsum = 0;
   for (size_t k = 0; k < n; ++k) {
-    mu_a += at(p_a, k);
-    mu_b += at(p_b, k);
+    const double w = weight(k);
+    mu_a += w * p_a[index(k)];
+    mu_b += w * p_b[index(k)];
+    wsum += w;
   }
-  mu_a /= static_cast<double>(n);
-  mu_b /= static_cast<double>(n);
+  if (!(wsum > 0)) return false;
+  mu_a /= wsum;
+  mu_b /= wsum;
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
   double spread = 0;
   for (size_t k = 0; k < n; ++k) {
-    const Eigen::Vector3d db = at(p_b, k) - mu_b;
-    H += db * (at(p_a, k) - mu_a).transpose();
-    spread += db.squaredNorm();
+    const Eigen::Vector3d db = p_b[index(k)] - mu_b;
+    H += weight(k) * db * (p_a[index(k)] - mu_a).transpose();
+    spread += weight(k) * db.squaredNorm();
   }
   if (!(spread > 1e-18)) return false;
   // R = V diag(1, 1, det(V U^T)) U^T (eq. 18), t = mu_a - R mu_b.
@@ -71,12 +76,26 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
   const int n = static_cast<int>(corr.size());
   if (n < std::max(3, options.min_inliers)) return result;
   std::vector<Eigen::Vector3d> p_a(corr.size()), p_b(corr.size());
+  std::vector<double> precision(corr.size());
   for (size_t i = 0; i < corr.size(); ++i) {
     p_a[i] = corr[i].p_a;
     p_b[i] = corr[i].p_b;
+    const double da = corr[i].obs_a(0) - corr[i].obs_a(2), db = corr[i].obs_b(0) - corr[i].obs_b(2);
+    precision[i] = da * da * db * db;
   }
   std::mt19937 rng(static_cast<uint32_t>(options.seed));
-  std::uniform_int_distribution<int> pick(0, n - 1);
+  // Minimal samples come from the nearer half (larger disparity at both times): the 3D-3D
+  // solution needs depth, and far points' depth is too noisy (sigma_z ~ z^2 sigma_d / (f b)).
+  std::vector<std::pair<double, int>> by_disparity(corr.size());
+  for (int i = 0; i < n; ++i) {
+    const StereoCorrespondence& c = corr[static_cast<size_t>(i)];
+    by_disparity[static_cast<size_t>(i)] = {
+        -std::min(c.obs_a(0) - c.obs_a(2), c.obs_b(0) - c.obs_b(2)), i};
+  }
+  std::sort(by_disparity.begin(), by_disparity.end());
+  const int pool_size = std::max(std::min(n, 8), n / 2);
+  std::uniform_int_distribution<int> pick_pool(0, pool_size - 1);
+  auto pick = [&](std::mt19937&) { return by_disparity[static_cast<size_t>(pick_pool(rng))].second; };
 
   auto count_inliers = [&](const Eigen::Isometry3d& T, std::vector<int>* inliers) {
     inliers->clear();
@@ -93,6 +112,7 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
   std::vector<int> best, current;
   Eigen::Isometry3d best_T = Eigen::Isometry3d::Identity();
   int needed = options.max_iterations;
+  const int min_iterations = std::min(options.max_iterations, 30);
   int it = 0;
   for (; it < needed && it < options.max_iterations; ++it) {
     int s[3];
@@ -108,10 +128,11 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
       const double w = static_cast<double>(best.size()) / n;
       const double p_fail = 1.0 - w * w * w;
       if (p_fail < 1e-12) {
-        needed = it + 1;
+        needed = std::max(min_iterations, it + 1);
       } else {
         const double k = std::log(1.0 - options.confidence) / std::log(p_fail);
-        needed = std::min(options.max_iterations, static_cast<int>(std::ceil(k)) + 1);
+        needed = std::min(options.max_iterations,
+                          std::max(min_iterations, static_cast<int>(std::ceil(k)) + 1));
       }
     }
   }
@@ -120,7 +141,7 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
   // Re-estimate from all inliers, then re-collect inliers (twice converges in practice).
   for (int round = 0; round < 2; ++round) {
     Eigen::Isometry3d T;
-    if (!SolveRigidSvd(p_a, p_b, best, &T)) break;
+    if (!SolveRigidSvd(p_a, p_b, best, &T, &precision)) break;
     count_inliers(T, &current);
     if (current.size() < best.size()) break;
     best.swap(current);

@@ -50,10 +50,12 @@ struct StereoCorrespondence {
 };
 
 // Closed-form rigid transform T with p_a ~= T * p_b minimizing sum |p_a - T p_b|^2 (Arun's SVD
-// with Umeyama's reflection fix). `idx` selects the correspondences (all if empty). Returns false
-// if fewer than 3 points or a degenerate (collinear) configuration.
+// with Umeyama's reflection fix). `idx` selects the correspondences (all if empty); `weights`
+// (optional, one per point of p_a) weights each squared residual. Returns false if fewer than 3
+// points or a degenerate (collinear) configuration.
 bool SolveRigidSvd(const std::vector<Eigen::Vector3d>& p_a, const std::vector<Eigen::Vector3d>& p_b,
-                   const std::vector<int>& idx, Eigen::Isometry3d* T_a_b);
+                   const std::vector<int>& idx, Eigen::Isometry3d* T_a_b,
+                   const std::vector<double>* weights = nullptr);
 
 struct RansacOptions {
   int max_iterations = 300;            // upper bound on random minimal samples
@@ -82,8 +84,10 @@ struct RansacResult {
 double ForwardReprojectionError(const StereoCamera& cam, const Eigen::Isometry3d& T_a_b,
                                 const StereoCorrespondence& c);
 
-// RANSAC over minimal 3-point SVD solutions; inliers by reprojection of p_a into the stereo pair
-// at b. The best hypothesis is re-estimated by SVD on all its inliers (twice).
+// RANSAC over minimal 3-point SVD solutions drawn from the nearer half of the points; inliers by
+// reprojection of p_a into the stereo pair at b. The best hypothesis is re-estimated by SVD on
+// all its inliers weighted by depth precision (disparity_a^2 disparity_b^2), kept if it has at
+// least as many inliers.
 RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
                           const RansacOptions& options);
 

@@ -1,0 +1,119 @@
+// Synthetic stereo data for the stereo VO tests: a calibration, textured images of a
+// fronto-parallel plane at a known disparity (exact sub-pixel shifts), and 3D-3D
+// correspondences from random points seen by a virtual rig under a known motion.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <Eigen/Geometry>
+#include <random>
+#include <vector>
+
+#include "fusionloc/stereo_vo/motion.hpp"
+#include "fusionloc/stereo_vo/stereo_vo.hpp"
+
+namespace fl::test::stereo {
+
+// Optical camera frame -> base frame (base x = camera z, y = -camera x, z = -camera y).
+inline Eigen::Matrix3d RotationBaseCamera() {
+  Eigen::Matrix3d r;
+  r << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+  return r;
+}
+
+inline fl::vo::StereoCalibration TestCalibration(int width = 640, int height = 480) {
+  fl::vo::StereoCalibration c;
+  c.fx = c.fy = 500.0;
+  c.cx = (width - 1) / 2.0;
+  c.cy = (height - 1) / 2.0;
+  c.baseline = 0.2;
+  c.width = width;
+  c.height = height;
+  c.rectified = true;
+  c.T_base_camera.setIdentity();
+  c.T_base_camera.linear() = RotationBaseCamera();
+  c.T_base_camera.translation() = Eigen::Vector3d(0.3, 0.1, 0.8);
+  return c;
+}
+
+// A large random texture with corners (rectangles of random gray) and fine grain.
+inline cv::Mat Texture(int width, int height, uint64_t seed) {
+  cv::RNG rng(seed);
+  cv::Mat tex(height, width, CV_8UC1, cv::Scalar(128));
+  for (int i = 0; i < width * height / 300; ++i) {
+    const int x = rng.uniform(0, width), y = rng.uniform(0, height);
+    const int w = rng.uniform(4, 30), h = rng.uniform(4, 30);
+    cv::rectangle(tex, cv::Rect(x, y, w, h), cv::Scalar(rng.uniform(0, 256)), cv::FILLED);
+  }
+  cv::Mat noise(height, width, CV_8UC1);
+  rng.fill(noise, cv::RNG::UNIFORM, 0, 40);
+  cv::add(tex, noise, tex);
+  cv::GaussianBlur(tex, tex, cv::Size(3, 3), 0.8);
+  return tex;
+}
+
+// The view of a fronto-parallel textured plane: the image is the texture translated by
+// (-offset_x, -offset_y) pixels (sub-pixel, bilinear), cropped to width x height.
+inline cv::Mat View(const cv::Mat& texture, double offset_x, double offset_y, int width,
+                    int height) {
+  cv::Mat m = (cv::Mat_<double>(2, 3) << 1, 0, -offset_x, 0, 1, -offset_y);
+  cv::Mat out;
+  cv::warpAffine(texture, out, m, cv::Size(width, height), cv::INTER_LINEAR,
+                 cv::BORDER_REFLECT_101);
+  return out;
+}
+
+// Stereo pair of a plane at depth z seen from camera x position cam_x (camera frame, metres):
+// left pixel u sees texture column u + fx * cam_x / z + margin; the right view is shifted by the
+// disparity fx * b / z.
+inline void PlanePair(const cv::Mat& texture, const fl::vo::StereoCalibration& c, double z,
+                      double cam_x, double cam_y, cv::Mat* left, cv::Mat* right) {
+  const double margin = 100.0;
+  const double ox = margin + c.fx * cam_x / z, oy = margin + c.fy * cam_y / z;
+  *left = View(texture, ox, oy, c.width, c.height);
+  *right = View(texture, ox + c.fx * c.baseline / z, oy, c.width, c.height);
+}
+
+// Random points in front of the rig at a, seen by the rig at b = a * T_a_b, observed with
+// Gaussian pixel noise; the first `outliers` correspondences get wrong observations at b.
+inline std::vector<fl::vo::StereoCorrespondence> MakeCorrespondences(
+    const fl::vo::StereoCamera& cam, const Eigen::Isometry3d& T_a_b, int n, int outliers,
+    double noise_px, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> ux(-8, 8), uy(-3, 2), uz(3, 40), uo(-60, 60);
+  std::normal_distribution<double> noise(0.0, noise_px > 0 ? noise_px : 1.0);
+  auto nz = [&]() { return noise_px > 0 ? noise(rng) : 0.0; };
+  std::vector<fl::vo::StereoCorrespondence> out;
+  const Eigen::Isometry3d T_b_a = T_a_b.inverse();
+  while (static_cast<int>(out.size()) < n) {
+    const Eigen::Vector3d p_a(ux(rng), uy(rng), uz(rng));
+    Eigen::Vector3d oa, ob;
+    if (!cam.Project(p_a, &oa) || !cam.Project(T_b_a * p_a, &ob)) continue;
+    fl::vo::StereoCorrespondence c;
+    c.obs_a = oa + Eigen::Vector3d(nz(), nz(), nz());
+    c.obs_b = ob + Eigen::Vector3d(nz(), nz(), nz());
+    if (static_cast<int>(out.size()) < outliers) {
+      c.obs_b += Eigen::Vector3d(uo(rng), uo(rng), 0.0);
+    }
+    c.obs_a(2) = std::min(c.obs_a(2), c.obs_a(0) - 0.2);
+    c.obs_b(2) = std::min(c.obs_b(2), c.obs_b(0) - 0.2);
+    c.p_a = cam.Triangulate(c.obs_a(0), c.obs_a(1), c.obs_a(0) - c.obs_a(2));
+    c.p_b = cam.Triangulate(c.obs_b(0), c.obs_b(1), c.obs_b(0) - c.obs_b(2));
+    out.push_back(c);
+  }
+  return out;
+}
+
+inline Eigen::Isometry3d MakeMotion(double rx, double ry, double rz, double tx, double ty,
+                                    double tz) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = (Eigen::AngleAxisd(rz, Eigen::Vector3d::UnitZ()) *
+                Eigen::AngleAxisd(ry, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(rx, Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  T.translation() = Eigen::Vector3d(tx, ty, tz);
+  return T;
+}
+
+}  // namespace fl::test::stereo
