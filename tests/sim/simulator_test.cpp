@@ -80,6 +80,55 @@ TEST(SimulatorTest, FramesCarryTheMessagesDueWithConsistentTimes) {
   EXPECT_FALSE(sim.Step(&f));
 }
 
+// The published messages, read only through their own fields and the calibration message, must
+// describe the simulated geometry: laser end points and back-projected pixels lie on surfaces.
+TEST(SimulatorTest, MessagesAgreeWithTheWorldGeometry) {
+  SimOptions o = Short(3.0);
+  o.laser.range_sigma_m = 0.0;
+  o.camera.enabled = false;
+  Simulator sim(o);
+  SimFrame f;
+  std::optional<fusionloc::stereo_calibration_t> calib;
+  int checked_beams = 0, checked_pixels = 0;
+  while (sim.Step(&f)) {
+    if (f.calibration) calib = f.calibration;
+    ASSERT_TRUE(calib.has_value());
+    const auto& gt = *f.ground_truth;
+    const Eigen::Isometry3d T_world_base = IsometryFromArrays(gt.pos, gt.orientation);
+    const Eigen::Isometry3d T_world_laser =
+        T_world_base * IsometryFromArrays(calib->T_base_laser.trans, calib->T_base_laser.quat);
+    const auto& scan = *f.laser;
+    for (int i = 0; i < scan.nranges; ++i) {
+      const double r = scan.ranges[i];
+      if (r <= 0) continue;
+      const double a = scan.rad0 + i * scan.radstep;
+      const Eigen::Vector3d p = T_world_laser * Eigen::Vector3d(r * std::cos(a), r * std::sin(a), 0);
+      ASSERT_LT(sim.world().DistanceToObstacles(p.head<2>()), 1e-3) << "beam " << i;
+      ++checked_beams;
+    }
+    if (f.step % 10 != 0) continue;
+    // Pixels back-projected with the calibration and the rendered depth land on a surface
+    // (an obstacle, or the floor at z = 0).
+    const Eigen::Isometry3d T_world_camera =
+        T_world_base * IsometryFromArrays(calib->T_base_camera.trans, calib->T_base_camera.quat);
+    std::vector<float> depth;
+    sim.camera().RenderDepth(sim.world(), f.T_world_base, CameraModel::kLeft, &depth);
+    for (int v = 5; v < 480; v += 47) {
+      for (int u = 3; u < 640; u += 41) {
+        const double d = depth[static_cast<size_t>(v) * 640 + u];
+        if (!std::isfinite(d)) continue;
+        const Eigen::Vector3d p = T_world_camera * Eigen::Vector3d((u - calib->cx) / calib->fx * d,
+                                                                   (v - calib->cy) / calib->fy * d, d);
+        const double dist = std::min(std::fabs(p.z()), sim.world().DistanceToObstacles(p.head<2>()));
+        ASSERT_LT(dist, 1e-6) << "pixel " << u << "," << v << " depth " << d;
+        ++checked_pixels;
+      }
+    }
+  }
+  EXPECT_GT(checked_beams, 1000);
+  EXPECT_GT(checked_pixels, 200);
+}
+
 TEST(SimulatorTest, SameSeedGivesByteIdenticalLogs) {
   test::TempDir dir;
   const SimOptions o = Short(2.0);
