@@ -205,8 +205,8 @@ double Rms(const std::vector<double>& e) {
   return e.empty() ? 0.0 : std::sqrt(s / static_cast<double>(e.size()));
 }
 
-fl::bench::Run BenchTriangulation(double sigma, int frames) {
-  fl::sim::SimOptions o;  // paper world
+fl::bench::Run BenchTriangulation(const std::string& world, double sigma, int frames) {
+  fl::sim::SimOptions o = fl::sim::DefaultOptionsForWorld(world);
   o.laser.enabled = o.camera.enabled = false;
   o.camera.pixel_noise_sigma = sigma;
   fl::sim::Simulator sim(o);
@@ -227,9 +227,9 @@ fl::bench::Run BenchTriangulation(double sigma, int frames) {
   }
   fl::bench::Run run;
   std::ostringstream name;
-  name << "triangulation-sigma-" << sigma;
+  name << "triangulation-" << (world == "paper" ? "" : world + "-") << "sigma-" << sigma;
   run.name = name.str();
-  run.input = "paper world, " + std::to_string(frames) + " stereo frames along the route";
+  run.input = world + " world, " + std::to_string(frames) + " stereo frames along the route";
   std::vector<double> typical = errors.typical;
   run.Add("rms_err_4_6m", Rms(errors.typical))
       .Add("median_err_4_6m", fl::bench::ComputeStats(typical).median)
@@ -261,6 +261,9 @@ int main(int argc, char** argv) {
   cli.AddFlag("sigmas", &sigmas, "comma-separated pixel-noise sigmas to calibrate ('' = none)");
   cli.AddFlag("frames", &frames, "stereo frames per noise level");
   cli.AddFlag("tmp", &tmp, "folder for the temporary logs");
+  bool corridor_triangulation = true;
+  cli.AddFlag("corridor-triangulation", &corridor_triangulation,
+              "also measure the triangulation error in the corridor world at the default noise");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
   if (frames < 1) {
     std::cerr << "fl-bench-sim: --frames must be >= 1\n";
@@ -270,8 +273,13 @@ int main(int argc, char** argv) {
     fl::bench::Report report("sim");
     for (const std::string& w : Split(worlds)) report.AddRun(BenchLog(w, duration, tmp));
     for (const std::string& s : Split(sigmas)) {
-      report.AddRun(BenchTriangulation(std::stod(s), frames));
+      report.AddRun(BenchTriangulation("paper", std::stod(s), frames));
       std::cerr << "[bench sim] sigma " << s << " done\n";
+    }
+    if (corridor_triangulation) {
+      // The corridor at the default noise: are its textures as good for stereo as the paper's?
+      report.AddRun(BenchTriangulation(
+          "corridor", fl::sim::DefaultOptionsForWorld("corridor").camera.pixel_noise_sigma, frames));
     }
     fl::bench::Publish(report, args);
   } catch (const std::exception& e) {
