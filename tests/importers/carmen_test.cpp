@@ -160,6 +160,11 @@ TEST(CarmenTest, RawCsailGetsGroundTruthFromTheCorrectedLog) {
   // The raw log's own odometry is kept.
   const auto odo = log.Decode<fusionloc::wheel_odometry_t>(channels::kOdometry, 0);
   EXPECT_DOUBLE_EQ(odo.x, 576.536523);
+  // The raw odometry's error against the reference is reported (docs/IMPORTERS.md).
+  bool fitted = false;
+  for (const auto& n : s.notes)
+    fitted |= n.find("108 translation steps: a1 0.0474") != std::string::npos;
+  EXPECT_TRUE(fitted);
 
   // Not for a corrected input, and not together with timestamps_from.
   EXPECT_THROW(ConvertCarmen(opts, ref, dir.file("p.lcmlog")), std::invalid_argument);
@@ -331,6 +336,38 @@ TEST(CarmenTest, NoiseHasTheDocumentedStatistics) {
   EXPECT_NEAR(std::sqrt(sxx / m), sigma_xy, 0.03 * sigma_xy);
   EXPECT_NEAR(std::sqrt(syy / m), sigma_xy, 0.03 * sigma_xy);
   EXPECT_NEAR(std::sqrt(stt / m), sigma_th, 0.03 * sigma_th);
+}
+
+TEST(CarmenTest, FitOdometryErrorRecoversTheNoiseModel) {
+  // Alternating 0.5 m straight steps and 0.5 rad turns in place.
+  std::vector<Pose2> truth = {Pose2()};
+  for (int k = 0; k < 20000; ++k) {
+    truth.push_back(truth.back() * (k % 2 == 0 ? Pose2(0.5, 0, 0) : Pose2(0, 0, 0.5)));
+  }
+  CarmenNoiseModel model;
+  model.a1 = 0.05;
+  model.a2 = 0.02;
+  model.a3 = 0.1;
+  model.a4 = 0.02;
+  model.min_sigma_xy = model.min_sigma_theta = 0.0;
+  const OdometryErrorFit fit = FitOdometryError(SynthesizeNoisyOdometry(model, 11, truth), truth);
+  EXPECT_EQ(fit.translation_steps, 10000);
+  EXPECT_EQ(fit.rotation_steps, 10000);
+  EXPECT_NEAR(fit.a1, model.a1, 0.03 * model.a1);
+  EXPECT_NEAR(fit.a2, model.a2, 0.03 * model.a2);
+  EXPECT_NEAR(fit.a3, model.a3, 0.03 * model.a3);
+  EXPECT_NEAR(fit.a4, model.a4, 0.03 * model.a4);
+  EXPECT_NEAR(fit.scale_error, 0.0, 0.002);
+
+  CarmenNoiseModel biased{};
+  biased.a1 = biased.a2 = biased.a3 = biased.a4 = 0.0;
+  biased.min_sigma_xy = biased.min_sigma_theta = 0.0;
+  biased.scale_error = -0.015;
+  biased.yaw_bias = 0.003;
+  const OdometryErrorFit b = FitOdometryError(SynthesizeNoisyOdometry(biased, 1, truth), truth);
+  EXPECT_NEAR(b.scale_error, -0.015, 1e-9);
+  EXPECT_NEAR(b.yaw_bias, 0.003, 1e-9);
+  EXPECT_THROW(FitOdometryError({Pose2()}, {}), std::invalid_argument);
 }
 
 TEST(CarmenTest, StandingStillGetsNoNoiseAndBiasIsApplied) {

@@ -402,6 +402,58 @@ std::vector<Pose2> SynthesizeNoisyOdometry(const CarmenNoiseModel& noise, uint64
   return out;
 }
 
+OdometryErrorFit FitOdometryError(const std::vector<Pose2>& odometry,
+                                  const std::vector<Pose2>& reference) {
+  if (odometry.size() != reference.size()) {
+    throw std::invalid_argument("FitOdometryError: " + std::to_string(odometry.size()) +
+                                " odometry poses but " + std::to_string(reference.size()) +
+                                " reference poses");
+  }
+  OdometryErrorFit fit;
+  double t_exy2 = 0, t_d2 = 0, t_et2 = 0, t_ex = 0, t_d = 0, t_et = 0;
+  double r_exy2 = 0, r_et2 = 0, r_dt2 = 0;
+  for (size_t k = 1; k < reference.size(); ++k) {
+    const Pose2 u = reference[k - 1].between(reference[k]);
+    const Pose2 o = odometry[k - 1].between(odometry[k]);
+    const double d = std::hypot(u.x, u.y), adt = std::abs(u.theta);
+    const double ex = o.x - u.x, ey = o.y - u.y, et = WrapAngle(o.theta - u.theta);
+    if (adt < 0.1 && d > 0.05) {
+      ++fit.translation_steps;
+      t_exy2 += 0.5 * (ex * ex + ey * ey);
+      t_d2 += d * d;
+      t_et2 += et * et;
+      t_ex += ex;
+      t_d += d;
+      t_et += et;
+    } else if (d < 0.1 && adt > 0.1) {
+      ++fit.rotation_steps;
+      r_exy2 += 0.5 * (ex * ex + ey * ey);
+      r_et2 += et * et;
+      r_dt2 += adt * adt;
+    }
+  }
+  if (fit.translation_steps > 0) {
+    fit.a1 = std::sqrt(t_exy2 / t_d2);
+    fit.a4 = std::sqrt(t_et2 / t_d2);
+    fit.scale_error = t_ex / t_d;
+    fit.yaw_bias = t_et / t_d;
+  }
+  if (fit.rotation_steps > 0) {
+    fit.a3 = std::sqrt(r_et2 / r_dt2);
+    fit.a2 = std::sqrt(r_exy2 / r_dt2);
+  }
+  return fit;
+}
+
+std::string OdometryErrorFit::ToString() const {
+  std::ostringstream ss;
+  ss.precision(3);
+  ss << translation_steps << " translation steps: a1 " << a1 << " m/m, a4 " << a4
+     << " rad/m, scale_error " << scale_error << ", yaw_bias " << yaw_bias << " rad/m; "
+     << rotation_steps << " rotation steps: a3 " << a3 << " rad/rad, a2 " << a2 << " m/rad";
+  return ss.str();
+}
+
 std::vector<size_t> MatchScansByRanges(const CarmenLog& superset, const CarmenLog& subset,
                                        double tolerance, const std::string& hint) {
   std::vector<size_t> match;
@@ -480,10 +532,16 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
     const std::vector<size_t> match = MatchScansByRanges(
         log, ref, options.range_match_tolerance,
         "it has no partner in the raw log: is the corrected log of the same run?");
+    std::vector<Pose2> odom_at_match, ref_poses;
     for (size_t k = 0; k < match.size(); ++k) {
       has_reference[match[k]] = true;
       reference[match[k]] = ref.scans[k].pose;
+      odom_at_match.push_back(log.scans[match[k]].odom);
+      ref_poses.push_back(ref.scans[k].pose);
     }
+    summary.notes.push_back(
+        "the log's odometry vs the reference (upper bounds, the reference has errors too): " +
+        FitOdometryError(odom_at_match, ref_poses).ToString());
     summary.notes.push_back("GROUND_TRUTH for " + std::to_string(match.size()) + " of " +
                             std::to_string(log.scans.size()) + " scans from '" +
                             options.ground_truth_from + "' (matched by ranges)");

@@ -25,6 +25,7 @@
 // Times: utime = round(ipc_timestamp * 1e6) (or logger_timestamp, see CarmenOptions).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <map>
 #include <string>
@@ -168,6 +169,24 @@ bool IsCorrectedCarmenLog(const CarmenOptions& options, const std::string& path)
 // The noisy odometry poses, one per scan, for a corrected log (see CarmenNoiseModel).
 std::vector<Pose2> SynthesizeNoisyOdometry(const CarmenNoiseModel& noise, uint64_t seed,
                                            const std::vector<Pose2>& corrected_poses);
+
+// How an odometry compares with a reference trajectory, in the terms of CarmenNoiseModel.
+// Per step k the odometry increment o = O_{k-1}^-1 O_k is compared with the reference
+// increment u = P_{k-1}^-1 P_k = (dx, dy, dθ), d = |(dx, dy)|, error e = o - u (angle wrapped).
+//   translation steps (|dθ| < 0.1 rad, d > 0.05 m): a1 = sqrt(Σ ½(ex² + ey²) / Σ d²),
+//     a4 = sqrt(Σ eθ² / Σ d²), scale_error = Σ ex / Σ d, yaw_bias = Σ eθ / Σ d;
+//   rotation steps (d < 0.1 m, |dθ| > 0.1 rad): a3 = sqrt(Σ eθ² / Σ dθ²),
+//     a2 = sqrt(Σ ½(ex² + ey²) / Σ dθ²).
+// The reference's own error is included, so these are upper bounds for the odometry.
+struct OdometryErrorFit {
+  int translation_steps = 0;
+  int rotation_steps = 0;
+  double a1 = NAN, a2 = NAN, a3 = NAN, a4 = NAN;  // NaN when no step of the kind
+  double scale_error = NAN, yaw_bias = NAN;
+  std::string ToString() const;
+};
+OdometryErrorFit FitOdometryError(const std::vector<Pose2>& odometry,
+                                  const std::vector<Pose2>& reference);
 
 // For each scan of `subset`, the index of the scan of `superset` with the same ranges (each
 // beam within `tolerance`), searched forward in order. Throws naming the first unmatched
