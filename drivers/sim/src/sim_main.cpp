@@ -30,12 +30,23 @@ int RunLive(const fl::sim::SimOptions& options, const std::string& url, double r
   const auto wall_start = std::chrono::steady_clock::now();
   fl::sim::SimFrame frame;
   int64_t frames = 0;
+  fl::RateLimitedWarning behind;
   while (!fl::ShutdownRequested() && sim.Step(&frame)) {
     if (rate > 0) {
       const double due_s = static_cast<double>(frame.step) * options.step_s / rate;
-      std::this_thread::sleep_until(wall_start + std::chrono::duration_cast<
-                                                     std::chrono::steady_clock::duration>(
-                                                     std::chrono::duration<double>(due_s)));
+      const auto due = wall_start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                        std::chrono::duration<double>(due_s));
+      const double late_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - due).count();
+      if (late_s > 0.5) {
+        behind.Warn("running " + std::to_string(late_s) +
+                    " s behind the requested pace; use a lower --rate, camera.supersampling: 1, "
+                    "or write a log (--log) and replay it");
+        status.SetState(fusionloc::status_t::LEVEL_WARN, "behind the requested pace");
+      } else if (late_s < 0.1) {
+        status.SetState(ok, "publishing world '" + options.world.name + "'");
+      }
+      std::this_thread::sleep_until(due);
     }
     const auto t0 = std::chrono::steady_clock::now();
     fl::sim::VisitMessages(frame, [&](const char* channel, const auto& msg) {
