@@ -1,4 +1,4 @@
-// fl-bench-sim (./fusionloc bench sim): how fast the simulator writes logs, how far its raw
+// fl-bench-simulator (./fusionloc bench simulator): how fast the simulator writes logs, how far its raw
 // odometry drifts, and the calibration of the camera pixel noise: the error of stereo
 // triangulated ORB corners against the rendered ground-truth depth, for several noise levels.
 #include <time.h>
@@ -43,7 +43,7 @@ fl::bench::Run BenchLog(const std::string& world, double duration, const std::st
   double last_cpu = CpuSeconds();
   const double cpu0 = last_cpu;
   const auto wall0 = fl::MonotonicUtime();
-  fl::bench::Progress progress("bench sim " + world, o.steps() + 1);
+  fl::bench::Progress progress("bench simulator " + world, o.steps() + 1);
   const fl::sim::LogStats stats = fl::sim::WriteLog(o, path, [&](int64_t done, int64_t) {
     const double now = CpuSeconds();
     step_ms.push_back(1e3 * (now - last_cpu));
@@ -246,7 +246,7 @@ fl::bench::Run BenchTriangulation(const std::string& world, double sigma, int fr
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::CommandLine cli("fl-bench-sim",
+  fl::CommandLine cli("fl-bench-simulator",
                       "Simulator benchmark: log-writing speed per world, raw odometry drift, and "
                       "the stereo triangulation error of ORB corners for several pixel-noise "
                       "levels (the calibration of camera.pixel_noise_sigma).");
@@ -266,15 +266,15 @@ int main(int argc, char** argv) {
               "also measure the triangulation error in the corridor world at the default noise");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
   if (frames < 1) {
-    std::cerr << "fl-bench-sim: --frames must be >= 1\n";
+    std::cerr << "fl-bench-simulator: --frames must be >= 1\n";
     return 2;
   }
   try {
-    fl::bench::Report report("sim");
+    fl::bench::Report report("simulator");
     for (const std::string& w : Split(worlds)) report.AddRun(BenchLog(w, duration, tmp));
     for (const std::string& s : Split(sigmas)) {
       report.AddRun(BenchTriangulation("paper", std::stod(s), frames));
-      std::cerr << "[bench sim] sigma " << s << " done\n";
+      std::cerr << "[bench simulator] sigma " << s << " done\n";
     }
     if (corridor_triangulation) {
       // The corridor at the default noise: are its textures as good for stereo as the paper's?
@@ -283,7 +283,7 @@ int main(int argc, char** argv) {
     }
     fl::bench::Publish(report, args);
   } catch (const std::exception& e) {
-    std::cerr << "fl-bench-sim: " << e.what() << "\n";
+    std::cerr << "fl-bench-simulator: " << e.what() << "\n";
     return 1;
   }
   return 0;
