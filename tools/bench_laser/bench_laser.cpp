@@ -196,6 +196,12 @@ int main(int argc, char** argv) {
       co.seed = seed;
       const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
       if (!in.reference.empty()) co.noisy_odometry = "false";
+      // csail-corrected.log.gz printed its time stamps with 6 significant digits: take them from
+      // the raw log of the same run when it is there (matched by ranges).
+      const fs::path raw_csail = fs::path(in.log).parent_path() / "mit-csail.clf";
+      if (fs::path(in.log).filename() == "csail-corrected.log.gz" && fs::exists(raw_csail)) {
+        co.timestamps_from = raw_csail.string();
+      }
       fl::importers::ConvertCarmen(co, in.log, lcm_log);
       LogData data = ReadLcm(lcm_log);
       if (!in.reference.empty()) {

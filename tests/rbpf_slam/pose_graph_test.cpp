@@ -1,0 +1,66 @@
+#include "fusionloc/rbpf_slam/pose_graph.hpp"
+
+#include <ceres/gradient_checker.h>
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <random>
+
+namespace fl::rbpf {
+namespace {
+
+TEST(RelativePose2Cost, GradientCheck) {
+  Eigen::Matrix3d info;
+  info << 400, 20, 5, 20, 300, -4, 5, -4, 900;
+  std::unique_ptr<ceres::CostFunction> cost(
+      RelativePose2Cost::Create(fl::Pose2(1.0, -0.3, 0.4), info));
+  double xi[3] = {0.2, -0.4, 3.0};  // near ±π: the wrap must not break derivatives
+  double xj[3] = {1.1, 0.5, -2.9};
+  std::vector<double*> params = {xi, xj};
+  ceres::NumericDiffOptions nd;
+  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
+  ceres::GradientChecker checker(cost.get(), no_manifolds, nd);
+  ceres::GradientChecker::ProbeResults results;
+  EXPECT_TRUE(checker.Probe(params.data(), 1e-7, &results)) << results.error_log;
+}
+
+TEST(RelativePose2Cost, ZeroAtTheMeasurement) {
+  const fl::Pose2 a(1, 2, 0.5), T(0.3, -0.2, 0.1);
+  const fl::Pose2 b = a * T;
+  std::unique_ptr<ceres::CostFunction> cost(RelativePose2Cost::Create(T, Eigen::Matrix3d::Identity()));
+  double xi[3] = {a.x, a.y, a.theta}, xj[3] = {b.x, b.y, b.theta}, r[3];
+  const double* p[] = {xi, xj};
+  ASSERT_TRUE(cost->Evaluate(p, r, nullptr));
+  EXPECT_NEAR(Eigen::Vector3d(r[0], r[1], r[2]).norm(), 0.0, 1e-12);
+}
+
+TEST(PoseGraph2D, LoopClosureCorrectsDrift) {
+  // A square of 4 x 10 steps; odometry edges exact, initial values drifted in heading.
+  PoseGraph2D g;
+  std::vector<fl::Pose2> truth;
+  fl::Pose2 p;
+  for (int k = 0; k < 40; ++k) {
+    truth.push_back(p);
+    p = p * fl::Pose2(0.5, 0, (k % 10 == 9) ? M_PI / 2 : 0.0);
+  }
+  fl::Pose2 drifted;
+  for (int k = 0; k < 40; ++k) {
+    g.AddNode(drifted);
+    if (k + 1 < 40) drifted = drifted * truth[k].between(truth[k + 1]) * fl::Pose2(0, 0, 0.01);
+  }
+  const Eigen::Matrix3d info = Eigen::Vector3d(1e4, 1e4, 1e4).asDiagonal();
+  for (int k = 0; k + 1 < 40; ++k) g.AddEdge({k, k + 1, truth[k].between(truth[k + 1]), info, 0.0});
+  g.AddEdge({39, 0, truth[39].between(truth[0]), info, 1.0});  // loop closure
+  const double before = (g.pose(39).translation() - truth[39].translation()).norm();
+  bool converged = false;
+  g.Optimize(50, &converged);
+  EXPECT_TRUE(converged);
+  EXPECT_GT(before, 0.3);
+  for (int k = 0; k < 40; ++k) {
+    EXPECT_NEAR((g.pose(k).translation() - truth[k].translation()).norm(), 0.0, 1e-4) << k;
+  }
+  EXPECT_THROW(g.AddEdge({0, 77, fl::Pose2(), info, 0.0}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace fl::rbpf

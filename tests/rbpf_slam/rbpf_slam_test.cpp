@@ -1,0 +1,211 @@
+#include "fusionloc/rbpf_slam/rbpf_slam.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "fusionloc/common/yaml_options.hpp"
+#include "laser_fixtures.hpp"
+
+namespace fl::rbpf {
+namespace {
+
+LaserScan MakeScan(fl::Utime t, std::vector<float> ranges) {
+  LaserScan s;
+  s.utime = t;
+  s.ranges = std::move(ranges);
+  s.rad0 = -M_PI / 2;
+  s.radstep = M_PI / 180;
+  return s;
+}
+
+TEST(Resampling, EffectiveSampleSize) {
+  EXPECT_NEAR(RbpfSlam::EffectiveSampleSize(std::vector<double>(30, 1.0 / 30)), 30.0, 1e-9);
+  std::vector<double> peaked(30, 0.0);
+  peaked[7] = 1.0;
+  EXPECT_NEAR(RbpfSlam::EffectiveSampleSize(peaked), 1.0, 1e-12);
+  EXPECT_NEAR(RbpfSlam::EffectiveSampleSize({0.5, 0.5, 0.0, 0.0}), 2.0, 1e-12);
+}
+
+TEST(Resampling, SystematicKeepsTheCountAndFollowsTheWeights) {
+  const std::vector<double> w = {0.5, 0.25, 0.125, 0.125, 0.0};
+  for (double u0 : {0.0, 0.3, 0.999}) {
+    const std::vector<int> parents = RbpfSlam::SystematicResample(w, u0);
+    ASSERT_EQ(parents.size(), w.size());
+    std::vector<int> count(w.size(), 0);
+    for (int p : parents) ++count[p];
+    for (size_t i = 0; i < w.size(); ++i) {
+      // Systematic resampling: each particle gets floor or ceil of n * w_i copies.
+      EXPECT_GE(count[i], static_cast<int>(std::floor(w[i] * 5)));
+      EXPECT_LE(count[i], static_cast<int>(std::ceil(w[i] * 5)));
+    }
+    EXPECT_EQ(count[4], 0);
+  }
+}
+
+// Small fast configuration for the simulated runs.
+RbpfSlamOptions TestOptions(int particles) {
+  RbpfSlamOptions o;
+  o.particles = particles;
+  o.grid.max_range = 25.0;
+  return o;
+}
+
+TEST(RbpfSlam, ResamplesOnlyWhenNeffDropsBelowTheThreshold) {
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  for (double threshold : {0.0, 0.5, 1.0}) {
+    RbpfSlamOptions o = TestOptions(10);
+    o.neff_threshold = threshold;
+    o.graph.enabled = false;
+    RbpfSlam slam(o);
+    int processed = 0, resampled = 0;
+    for (size_t k = 0; k < 60; ++k) {
+      ScanResult r;
+      ASSERT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+      if (k == 0 || !r.processed) continue;
+      ++processed;
+      EXPECT_EQ(slam.num_particles(), 10);
+      // Resampling happens exactly when N_eff < N_th.
+      EXPECT_EQ(r.resampled, r.neff < threshold * 10) << "scan " << k << " neff " << r.neff;
+      resampled += r.resampled ? 1 : 0;
+      if (r.resampled) {
+        const auto w = slam.NormalizedWeights();
+        EXPECT_NEAR(RbpfSlam::EffectiveSampleSize(w), 10.0, 1e-9);  // uniform after resampling
+      }
+    }
+    ASSERT_GT(processed, 20);
+    if (threshold == 0.0) {
+      EXPECT_EQ(resampled, 0);
+    }
+    if (threshold == 1.0) {
+      EXPECT_EQ(resampled, processed);
+    }
+  }
+}
+
+TEST(RbpfSlam, SimulatedLoopIsClosed) {
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  lo.laps = 1;
+  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  RbpfSlamOptions o = TestOptions(10);
+  RbpfSlam slam(o);
+  int factors = 0, loops = 0;
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    ASSERT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    for (const KeyframeFactor& f : r.factors) {
+      ++factors;
+      loops += f.is_loop_closure ? 1 : 0;
+      EXPECT_LT(f.utime_i, f.utime_j);
+      EXPECT_GT(f.information.determinant(), 0.0);
+    }
+  }
+  slam.Finish();
+  EXPECT_GT(factors, 20);
+  EXPECT_GE(loops, 1);
+  EXPECT_GE(slam.stats().loop_closures, 1);
+  // The trajectory ends where it started (the run is a closed loop) and stays near the truth.
+  const auto traj = slam.Trajectory();
+  ASSERT_EQ(traj.size(), run.utimes.size());
+  double max_err = 0.0, odom_end_err = 0.0;
+  for (size_t k = 0; k < traj.size(); ++k) {
+    max_err = std::max(max_err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
+  }
+  odom_end_err = (run.odom.back().translation() - run.truth.back().translation()).norm();
+  const double end_err = (traj.back().T_world_base.translation() - run.truth.back().translation()).norm();
+  EXPECT_GT(odom_end_err, 0.5) << "the simulated odometry should drift";
+  EXPECT_LT(end_err, 0.1);
+  EXPECT_LT(max_err, 0.25);
+}
+
+TEST(RbpfSlamBadInput, InvalidBeamsAreIgnored) {
+  RbpfSlam slam(TestOptions(2));
+  std::vector<float> r(181, 3.0f);
+  r[0] = std::numeric_limits<float>::quiet_NaN();
+  r[1] = std::numeric_limits<float>::infinity();
+  r[2] = 0.0f;
+  r[3] = -1.0f;
+  r[4] = 80.0f;  // over max_range
+  ScanResult res;
+  ASSERT_TRUE(slam.AddScan(MakeScan(1000, r), fl::Pose2(), &res).ok());
+  EXPECT_EQ(res.valid_beams, 176);
+  EXPECT_EQ(slam.stats().invalid_beams, 5);
+  // A scan with no valid beam at all is accepted (nothing to match) and does not crash.
+  ASSERT_TRUE(slam.AddScan(MakeScan(2000, std::vector<float>(181, NAN)), fl::Pose2(0.5, 0, 0), &res).ok());
+  EXPECT_EQ(res.valid_beams, 0);
+  EXPECT_TRUE(std::isfinite(res.T_world_base.x));
+}
+
+TEST(RbpfSlamBadInput, BeamCountChangeIsAnError) {
+  RbpfSlam slam(TestOptions(2));
+  ASSERT_TRUE(slam.AddScan(MakeScan(1000, std::vector<float>(181, 3.0f)), fl::Pose2(), nullptr).ok());
+  const Status s = slam.AddScan(MakeScan(2000, std::vector<float>(180, 3.0f)), fl::Pose2(), nullptr);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("180 beams"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("181"), std::string::npos);
+  EXPECT_EQ(slam.stats().rejected_bad_scan, 1);
+  EXPECT_TRUE(slam.AddScan(MakeScan(3000, std::vector<float>(181, 3.0f)), fl::Pose2(), nullptr).ok());
+}
+
+TEST(RbpfSlamBadInput, TimeGoingBackwardsIsDropped) {
+  RbpfSlam slam(TestOptions(2));
+  ASSERT_TRUE(slam.AddScan(MakeScan(5000, std::vector<float>(181, 3.0f)), fl::Pose2(), nullptr).ok());
+  const Status s = slam.AddScan(MakeScan(4000, std::vector<float>(181, 3.0f)), fl::Pose2(), nullptr);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("does not come after"), std::string::npos);
+  EXPECT_FALSE(slam.AddScan(MakeScan(5000, std::vector<float>(181, 3.0f)), fl::Pose2(), nullptr).ok());
+  EXPECT_EQ(slam.stats().dropped_time_backwards, 2);
+  EXPECT_EQ(slam.stats().scans, 1);
+  EXPECT_FALSE(slam.AddScan(MakeScan(6000, std::vector<float>(181, 3.0f)), fl::Pose2(NAN, 0, 0), nullptr).ok());
+}
+
+TEST(RbpfSlamBadInput, OdometryJumpIsFlaggedAndNotTrusted) {
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.2;
+  lo.odom_rot_bias = 0.0;
+  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  RbpfSlam slam(TestOptions(10));
+  const fl::Pose2 jump(25.0, -7.0, 1.0);  // the odometry teleports at scan 30
+  int flagged = 0;
+  for (size_t k = 0; k < 50; ++k) {
+    const fl::Pose2 odom = k >= 30 ? jump * run.odom[k] : run.odom[k];
+    ScanResult r;
+    ASSERT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), odom, &r).ok());
+    flagged += r.odometry_jump ? 1 : 0;
+  }
+  EXPECT_EQ(flagged, 1);
+  EXPECT_EQ(slam.stats().odometry_jumps, 1);
+  // The estimate followed the scans, not the jump.
+  const fl::Pose2 est = slam.CurrentPose();
+  const fl::Pose2 truth = run.truth[49];
+  EXPECT_LT(std::hypot(est.x - truth.x, est.y - truth.y), 0.3);
+}
+
+TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
+  RbpfSlamOptions o;
+  EXPECT_TRUE(o.Validate().ok());
+  o.particles = 0;
+  EXPECT_NE(o.Validate().message().find("particles"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.grid.field_max_distance = 2.0;
+  EXPECT_NE(o.Validate().message().find("field_max_distance"), std::string::npos);
+  EXPECT_THROW(RbpfSlam bad(o), std::invalid_argument);
+}
+
+TEST(RbpfSlamOptions, ConfigFileLoadsAndMatchesDefaults) {
+  const std::string path = std::string(FL_SOURCE_DIR) + "/config/rbpf_slam.yaml";
+  const RbpfSlamOptions o = fl::LoadYamlFile<RbpfSlamOptions>(path);
+  EXPECT_EQ(fl::SaveYamlString(o), fl::SaveYamlString(RbpfSlamOptions()));
+  EXPECT_THROW(fl::LoadYamlString<RbpfSlamOptions>("particle: 30\n"), fl::ConfigError);
+}
+
+}  // namespace
+}  // namespace fl::rbpf

@@ -1,0 +1,67 @@
+#include "fusionloc/rbpf_slam/scan_matcher.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "laser_fixtures.hpp"
+
+namespace fl::rbpf {
+namespace {
+
+TEST(ScanMatcher, LikelihoodFollowsEquation3) {
+  GridOptions go;
+  TiledGrid g(go);
+  g.UpdateCell(0, 0, 300);  // obstacle centre at (0.025, 0.025)
+  MatcherOptions mo;
+  mo.sigma = 0.05;
+  mo.z_hit = 0.9;
+  mo.z_rand = 0.1;
+  // Points at 0, 0.1 and beyond the field (0.4 m) from the obstacle.
+  const std::vector<Eigen::Vector2d> pts = {{0.025, 0.025}, {0.125, 0.025}, {2.0, 2.0}};
+  int inliers = 0;
+  const double ll = ScanLogLikelihood(g, pts, fl::Pose2(), mo, &inliers);
+  auto p = [&](double d) { return std::log(0.9 * std::exp(-d * d / (2 * 0.05 * 0.05)) + 0.1); };
+  EXPECT_NEAR(ll, p(0.0) + p(0.1) + p(0.4), 1e-3);
+  EXPECT_EQ(inliers, 2);
+  // Moving away from the obstacle lowers the likelihood.
+  EXPECT_LT(ScanLogLikelihood(g, pts, fl::Pose2(0.05, 0, 0), mo), ll);
+}
+
+TEST(ScanMatcher, RecoversAPerturbedPoseInTheRoom) {
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  GridOptions go;
+  TiledGrid g(go);
+  // Map from a few exact scans around the true pose.
+  const fl::Pose2 truth(-6.0, -4.5, 0.3);
+  for (double dx : {-0.5, 0.0, 0.5}) {
+    const fl::Pose2 p = truth * fl::Pose2(dx, 0, 0);
+    const auto r = world.Scan(p, 361, -M_PI / 2, M_PI / 360, 25.0);
+    std::vector<Eigen::Vector2d> ends;
+    for (int k = 0; k < 361; ++k) {
+      if (!std::isfinite(r[k])) continue;
+      const double a = -M_PI / 2 + k * M_PI / 360;
+      ends.push_back(p * Eigen::Vector2d(r[k] * std::cos(a), r[k] * std::sin(a)));
+    }
+    g.IntegrateScan(p.translation(), ends, std::vector<uint8_t>(ends.size(), 1));
+  }
+  const auto r = world.Scan(truth, 181, -M_PI / 2, M_PI / 180, 25.0);
+  std::vector<Eigen::Vector2d> pts;
+  for (int k = 0; k < 181; ++k) {
+    if (!std::isfinite(r[k])) continue;
+    const double a = -M_PI / 2 + k * M_PI / 180;
+    pts.emplace_back(r[k] * std::cos(a), r[k] * std::sin(a));
+  }
+  MatcherOptions mo;
+  mo.max_iterations = 30;
+  const fl::Pose2 start = truth * fl::Pose2(0.12, -0.08, 0.06);
+  const MatchResult m = MatchScan(g, pts, start, mo);
+  ASSERT_TRUE(m.ok);
+  EXPECT_NEAR(m.T_world_base.x, truth.x, 0.02);
+  EXPECT_NEAR(m.T_world_base.y, truth.y, 0.02);
+  EXPECT_NEAR(m.T_world_base.theta, truth.theta, 0.01);
+  EXPECT_GT(m.log_likelihood, ScanLogLikelihood(g, pts, start, mo));
+}
+
+}  // namespace
+}  // namespace fl::rbpf

@@ -1,0 +1,84 @@
+#include "fusionloc/rbpf_slam/tiled_grid.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace fl::rbpf {
+namespace {
+
+GridOptions Opts() {
+  GridOptions o;
+  o.resolution = 0.05;
+  o.field_max_distance = 0.4;
+  return o;
+}
+
+// Makes cell (cx, cy) an obstacle (one hit is above the threshold).
+void MakeObstacle(TiledGrid* g, int cx, int cy) { g->UpdateCell(cx, cy, 300); }
+
+TEST(TiledGrid, DistanceFieldIsEuclideanDistanceToNearestObstacle) {
+  TiledGrid g(Opts());
+  MakeObstacle(&g, 10, 10);
+  EXPECT_TRUE(g.IsOccupied(10, 10));
+  EXPECT_DOUBLE_EQ(g.CellDistance(10, 10), 0.0);
+  EXPECT_NEAR(g.CellDistance(13, 14), 5 * 0.05, 1e-3);   // 3-4-5 triangle
+  EXPECT_NEAR(g.CellDistance(10, 16), 6 * 0.05, 1e-3);
+  EXPECT_NEAR(g.CellDistance(10, 40), 0.4, 1e-9);          // saturated
+  // Interpolated lookup at world points: the centre of cell 10 is 0.525 m.
+  EXPECT_NEAR(g.Distance({0.525, 0.525}), 0.0, 1e-9);
+  EXPECT_NEAR(g.Distance({0.525 + 0.15, 0.525}), 0.15, 1e-3);
+  // Gradient points away from the obstacle.
+  Eigen::Vector2d grad;
+  g.Distance({0.525 + 0.12, 0.525}, &grad);
+  EXPECT_GT(grad.x(), 0.8);
+  // On a row of cell centres the bilinear y-derivative is one-sided (distance grows both ways).
+  EXPECT_LT(std::abs(grad.y()), 0.5 * grad.x());
+}
+
+TEST(TiledGrid, DistanceFieldCrossesTileBordersAndNegativeCoordinates) {
+  TiledGrid g(Opts());
+  MakeObstacle(&g, -1, -1);  // a corner of four tiles
+  EXPECT_NEAR(g.CellDistance(2, 3), 0.05 * std::sqrt(9.0 + 16.0), 1e-3);
+  EXPECT_NEAR(g.CellDistance(-4, -5), 0.05 * 5.0, 1e-3);
+  EXPECT_NEAR(g.Distance({-0.025, -0.025}), 0.0, 1e-9);
+}
+
+TEST(TiledGrid, ObstacleRemovedRestoresTheField) {
+  TiledGrid g(Opts());
+  MakeObstacle(&g, 0, 0);
+  MakeObstacle(&g, 6, 0);
+  EXPECT_NEAR(g.CellDistance(4, 0), 0.10, 1e-3);
+  // Clear (6, 0) with misses until it is free.
+  for (int i = 0; i < 40 && g.IsOccupied(6, 0); ++i) g.UpdateCell(6, 0, -30);
+  ASSERT_FALSE(g.IsOccupied(6, 0));
+  EXPECT_NEAR(g.CellDistance(4, 0), 0.20, 1e-3);
+  EXPECT_NEAR(g.CellDistance(6, 0), 0.30, 1e-3);
+}
+
+TEST(TiledGrid, IntegrateScanClearsFreeSpaceAndMarksHits) {
+  TiledGrid g(Opts());
+  std::vector<Eigen::Vector2d> ends = {{2.0, 0.01}};
+  std::vector<uint8_t> hit = {1};
+  g.IntegrateScan({0.01, 0.01}, ends, hit);
+  EXPECT_TRUE(g.IsOccupied(g.CellX(2.0), 0));
+  EXPECT_LT(g.LogOdds(g.CellX(1.0), 0), 0.0f);
+  EXPECT_FALSE(g.IsKnown(g.CellX(1.0), 5));
+}
+
+TEST(TiledGrid, CopyOnWriteCopiesOnlyTheTileWrittenTo) {
+  TiledGrid a(Opts());
+  MakeObstacle(&a, 0, 0);
+  MakeObstacle(&a, 200, 0);  // another tile (64 cells per tile)
+  TiledGrid b = a;           // a particle copy: shares every tile
+  EXPECT_EQ(a.TileAddress(0, 0), b.TileAddress(0, 0));
+  EXPECT_EQ(b.NumSharedTiles(), b.NumTiles());
+  MakeObstacle(&b, 210, 5);  // far from tile borders: writes one tile only
+  EXPECT_NE(a.TileAddress(200, 0), b.TileAddress(200, 0));
+  EXPECT_EQ(a.TileAddress(0, 0), b.TileAddress(0, 0));  // untouched tile still shared
+  EXPECT_FALSE(a.IsOccupied(210, 5));                    // the original is unchanged
+  EXPECT_TRUE(b.IsOccupied(210, 5));
+}
+
+}  // namespace
+}  // namespace fl::rbpf
