@@ -45,7 +45,7 @@ TEST(ImporterProgramsTest, CarmenUsageHelpAndConfig) {
   EXPECT_EQ(RunProgram(dir, "fl-carmen2lcm --config c.yaml --print-config").status, 0);
   fl::test::WriteText(dir.file("bad.yaml"), "noise:\n  a9: 1\n");
   const Result bad = RunProgram(dir, "fl-carmen2lcm --config bad.yaml in.log");
-  EXPECT_EQ(bad.status, 1);
+  EXPECT_EQ(bad.status, 2);
   EXPECT_NE(bad.err.find("a9"), std::string::npos) << bad.err;
 }
 

@@ -58,7 +58,8 @@ int main(int argc, char** argv) {
       "      --timestamps-from ../shared/data/laser/mit-csail.clf\n"
       "  fl-carmen2lcm ../shared/data/laser/mit-csail.clf csail-raw.lcmlog \\\n"
       "      --ground-truth-from ../shared/data/laser/csail-corrected.log.gz\n"
-      "Exit status: 0 done, 1 conversion failed (nothing written), 2 usage error.\n");
+      "Exit status: 0 done, 1 conversion failed (nothing written), 2 usage or\n"
+      "configuration error.\n");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
   try {
     fl::importers::CarmenOptions options;
@@ -85,6 +86,9 @@ int main(int argc, char** argv) {
     const auto summary = fl::importers::ConvertCarmen(options, in, out);
     std::cout << summary.ToString();
     return 0;
+  } catch (const fl::ConfigError& e) {
+    std::cerr << "fl-carmen2lcm: invalid configuration: " << e.what() << "\n";
+    return 2;
   } catch (const std::exception& e) {
     std::cerr << "fl-carmen2lcm: error: " << e.what() << "\n";
     return 1;

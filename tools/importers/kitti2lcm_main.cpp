@@ -34,7 +34,8 @@ int main(int argc, char** argv) {
   cli.AddEpilog(
       "\nExample:\n"
       "  fl-kitti2lcm ../shared/data/stereo/kitti_raw_2011_09_26_drive_0001 kitti0001.lcmlog\n"
-      "Exit status: 0 done, 1 conversion failed (nothing written), 2 usage error.\n");
+      "Exit status: 0 done, 1 conversion failed (nothing written), 2 usage or\n"
+      "configuration error.\n");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
   try {
     fl::importers::KittiOptions options;
@@ -65,6 +66,9 @@ int main(int argc, char** argv) {
     const auto summary = fl::importers::ConvertKitti(options, folder, out);
     std::cout << summary.ToString();
     return 0;
+  } catch (const fl::ConfigError& e) {
+    std::cerr << "fl-kitti2lcm: invalid configuration: " << e.what() << "\n";
+    return 2;
   } catch (const std::exception& e) {
     std::cerr << "fl-kitti2lcm: error: " << e.what() << "\n";
     return 1;
