@@ -8,7 +8,9 @@
 //      rows/cols 0, 1, 5), RBPF_TRAJECTORY (fusionloc.trajectory_t, keyframe poses whenever the
 //      pose graph changes and at the end), RBPF_MAP (fusionloc.occupancy_grid_t, every
 //      --map-period-s of data time and at the end), STATUS_FL_RBPF_SLAM.
+#include <algorithm>
 #include <cmath>
+#include <deque>
 #include <filesystem>
 #include <iostream>
 #include <variant>
@@ -199,66 +201,85 @@ int main(int argc, char** argv) {
   auto publish_graph = [&](fl::Utime utime) {
     lcm->Publish(fl::channels::kRbpfTrajectory, ToTrajectoryMsg(utime, slam.KeyframePoses()), utime);
   };
-  auto process = [&]() {
+  // Scans wait here until odometry at or after their time has been buffered (the merger
+  // releases a scan once the odometry stream has *sent* a later sample, which may still be
+  // queued behind it).
+  std::deque<fl::rbpf::LaserScan> pending;
+  auto run_scan = [&](const fl::rbpf::LaserScan& scan) {
+    fl::Pose2 odom;
+    if (!no_odometry) {
+      const fl::Status st = odom_buffer.Lookup(scan.utime, &odom);
+      if (!st.ok()) {
+        status.CountDropped("LASER: " + st.message());
+        warn.Warn("LASER scan dropped: " + st.message());
+        return;
+      }
+    } else {
+      odom = slam.stats().scans == 0 ? fl::Pose2() : slam.CurrentPose();
+    }
+    const fl::Utime t0 = fl::MonotonicUtime();
+    fl::rbpf::ScanResult r;
+    const fl::Status st = slam.AddScan(scan, odom, &r);
+    status.AddItemTime((fl::MonotonicUtime() - t0) * 1e-3);
+    if (!st.ok()) {
+      status.CountDropped("LASER: " + st.message());
+      warn.Warn(st.message());
+      return;
+    }
+    started = true;
+    last_utime = scan.utime;
+    lcm->Publish(fl::channels::kRbpfPose, ToPoseMsg(scan.utime, r.T_world_base), scan.utime);
+    status.CountOut();
+    for (const auto& f : r.factors) lcm->Publish(fl::channels::kRbpfFactors, ToFactorMsg(f), scan.utime);
+    if (r.graph_changed) publish_graph(scan.utime);
+    if (r.odometry_jump) warn.Warn("odometry jump at utime " + std::to_string(scan.utime) + " flagged; step not trusted");
+    if (map_period_s > 0 && scan.utime - last_map_utime >= fl::SecondsToUtime(map_period_s)) {
+      lcm->Publish(fl::channels::kRbpfMap, ToGridMsg(scan.utime, slam.BestMap()), scan.utime);
+      last_map_utime = scan.utime;
+    }
+    const auto& s = slam.stats();
+    status.Set("particles", slam.num_particles());
+    status.Set("neff", r.neff);
+    status.Set("keyframes", static_cast<double>(s.keyframes));
+    status.Set("loop_closures", static_cast<double>(s.loop_closures));
+    status.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
+    status.Set("invalid_beams", static_cast<double>(s.invalid_beams));
+    status.SetState(fusionloc::status_t::LEVEL_OK, "running");
+  };
+  const fl::Utime max_wait_us = fl::SecondsToUtime(merge_latency_s);
+  auto process = [&](bool flush) {
     fl::StreamMerger<Input>::Item item;
+    fl::Utime newest = 0;
     while (merger.Pop(&item)) {
+      newest = std::max(newest, item.utime);
       if (const fl::Pose2* odom = std::get_if<fl::Pose2>(&item.value)) {
         const fl::Status st = odom_buffer.Add(item.utime, *odom);
         if (!st.ok()) warn.Warn("ODOMETRY: " + st.message());
-        continue;
-      }
-      const fl::rbpf::LaserScan& scan = std::get<fl::rbpf::LaserScan>(item.value);
-      fl::Pose2 odom;
-      if (!no_odometry) {
-        const fl::Status st = odom_buffer.Lookup(scan.utime, &odom);
-        if (!st.ok()) {
-          status.CountDropped("LASER: " + st.message());
-          warn.Warn("LASER scan dropped: " + st.message());
-          continue;
-        }
       } else {
-        odom = slam.stats().scans == 0 ? fl::Pose2() : slam.CurrentPose();
+        pending.push_back(std::move(std::get<fl::rbpf::LaserScan>(item.value)));
       }
-      const fl::Utime t0 = fl::MonotonicUtime();
-      fl::rbpf::ScanResult r;
-      const fl::Status st = slam.AddScan(scan, odom, &r);
-      status.AddItemTime((fl::MonotonicUtime() - t0) * 1e-3);
-      if (!st.ok()) {
-        status.CountDropped("LASER: " + st.message());
-        warn.Warn(st.message());
-        continue;
+      while (!pending.empty() &&
+             (no_odometry || (!odom_buffer.empty() && odom_buffer.newest() >= pending.front().utime) ||
+              newest - pending.front().utime > max_wait_us)) {
+        run_scan(pending.front());
+        pending.pop_front();
       }
-      started = true;
-      last_utime = scan.utime;
-      lcm->Publish(fl::channels::kRbpfPose, ToPoseMsg(scan.utime, r.T_world_base), scan.utime);
-      status.CountOut();
-      for (const auto& f : r.factors) lcm->Publish(fl::channels::kRbpfFactors, ToFactorMsg(f), scan.utime);
-      if (r.graph_changed) publish_graph(scan.utime);
-      if (r.odometry_jump) warn.Warn("odometry jump at utime " + std::to_string(scan.utime) + " flagged; step not trusted");
-      if (map_period_s > 0 && scan.utime - last_map_utime >= fl::SecondsToUtime(map_period_s)) {
-        lcm->Publish(fl::channels::kRbpfMap, ToGridMsg(scan.utime, slam.BestMap()), scan.utime);
-        last_map_utime = scan.utime;
-      }
-      const auto& s = slam.stats();
-      status.Set("particles", slam.num_particles());
-      status.Set("neff", r.neff);
-      status.Set("keyframes", static_cast<double>(s.keyframes));
-      status.Set("loop_closures", static_cast<double>(s.loop_closures));
-      status.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
-      status.Set("invalid_beams", static_cast<double>(s.invalid_beams));
-      status.SetState(fusionloc::status_t::LEVEL_OK, "running");
+    }
+    if (flush) {
+      for (const auto& scan : pending) run_scan(scan);
+      pending.clear();
     }
   };
 
   status.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for LASER");
   while (!fl::ShutdownRequested()) {
     const int rc = lcm->HandleSubscriptions(100);
-    process();
+    process(false);
     status.Tick();
     if (rc < 0) break;  // end of the replayed log
   }
   merger.Flush();
-  process();
+  process(true);
   slam.Finish();
   if (started) {
     publish_graph(last_utime);
