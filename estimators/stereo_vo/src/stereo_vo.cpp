@@ -326,10 +326,44 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       velocity_dt_s_ > 0 && dt_s / velocity_dt_s_ > 0.75 && dt_s / velocity_dt_s_ < 1.33;
   std::vector<Quad> quads;
   QuadStats qstats;
+  // Attempt 0: constant-velocity prediction (narrow windows). Attempt 1: the global image
+  // shift (median flow of a wide search on a subset, which captures fast turns), then narrow
+  // windows around the shifted positions; without enough wide matches, wide windows.
   for (int attempt = can_predict ? 0 : 1; attempt < 2; ++attempt) {
     const bool predict = attempt == 0;
     std::vector<cv::Point2f> pred_l(static_cast<size_t>(prev.fl.size()), cv::Point2f(-1, -1));
     std::vector<cv::Point2f> pred_r(static_cast<size_t>(prev.fr.size()), cv::Point2f(-1, -1));
+    double radius = options_.matching.window_px;
+    cv::Point2f shift(0, 0);
+    if (!predict) {
+      std::vector<cv::Point2f> probe(static_cast<size_t>(prev.fl.size()), cv::Point2f(-1, -1));
+      const int step = std::max(1, prev.stereo_matches / 200);
+      int n = 0;
+      for (int i = 0; i < prev.fl.size(); ++i) {
+        if (prev.stereo[static_cast<size_t>(i)] >= 0 && n++ % step == 0) {
+          probe[static_cast<size_t>(i)] = prev.fl.keypoints[static_cast<size_t>(i)].pt;
+        }
+      }
+      const std::vector<int> wide = MatchTemporal(prev.fl, cur->fl, probe,
+                                                  options_.matching.window_unpredicted_px,
+                                                  options_.matching);
+      std::vector<float> dx, dy;
+      for (size_t i = 0; i < wide.size(); ++i) {
+        if (wide[i] < 0) continue;
+        dx.push_back(cur->fl.keypoints[static_cast<size_t>(wide[i])].pt.x - probe[i].x);
+        dy.push_back(cur->fl.keypoints[static_cast<size_t>(wide[i])].pt.y - probe[i].y);
+      }
+      if (dx.size() >= 8) {
+        std::nth_element(dx.begin(), dx.begin() + static_cast<long>(dx.size() / 2), dx.end());
+        std::nth_element(dy.begin(), dy.begin() + static_cast<long>(dy.size() / 2), dy.end());
+        shift = cv::Point2f(dx[dx.size() / 2], dy[dy.size() / 2]);
+        // Translation makes the flow non-uniform: allow for it around the global shift.
+        radius = std::min(options_.matching.window_unpredicted_px,
+                          3.0 * options_.matching.window_px);
+      } else {
+        radius = options_.matching.window_unpredicted_px;
+      }
+    }
     const Eigen::Isometry3d T_b_a = T_prev_velocity_.inverse();
     for (int i = 0; i < prev.fl.size(); ++i) {
       const int j = prev.stereo[static_cast<size_t>(i)];
@@ -337,8 +371,8 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       const cv::Point2f pl = prev.fl.keypoints[static_cast<size_t>(i)].pt;
       const cv::Point2f pr = prev.fr.keypoints[static_cast<size_t>(j)].pt;
       if (!predict) {
-        pred_l[static_cast<size_t>(i)] = pl;
-        pred_r[static_cast<size_t>(j)] = pr;
+        pred_l[static_cast<size_t>(i)] = pl + shift;
+        pred_r[static_cast<size_t>(j)] = pr + shift;
         continue;
       }
       Eigen::Vector3d uvu;
@@ -348,15 +382,11 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       pred_r[static_cast<size_t>(j)] =
           cv::Point2f(static_cast<float>(uvu(2)), static_cast<float>(uvu(1)));
     }
-    const double radius =
-        predict ? options_.matching.window_px : options_.matching.window_unpredicted_px;
     const std::vector<int> tl = MatchTemporal(prev.fl, cur->fl, pred_l, radius, options_.matching);
     const std::vector<int> tr = MatchTemporal(prev.fr, cur->fr, pred_r, radius, options_.matching);
     quads = CloseQuadrilaterals(prev.fl, prev.fr, cur->fl, cur->fr, prev.stereo, cur->stereo, tl,
                                 tr, options_.matching, &qstats);
-    if (static_cast<int>(quads.size()) >= std::max(options_.min_quads, 2 * options_.min_quads)) {
-      break;  // enough: no need for the wide search
-    }
+    if (static_cast<int>(quads.size()) >= 2 * options_.min_quads) break;  // enough
   }
   result.stats.quads = qstats;
   result.stats.ms_matching += NowMs() - t0;

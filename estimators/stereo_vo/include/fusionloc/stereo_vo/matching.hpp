@@ -83,7 +83,7 @@ struct MatchOptions {
   int max_hamming = 60;                 // [bits of 256] descriptor distance limit
   double ratio = 0.9;                   // best/second-best distance ratio (1 = off)
   double window_px = 20.0;              // [px] temporal half-window around the prediction
-  double window_unpredicted_px = 150.0; // [px] temporal half-window without a prediction
+  double window_unpredicted_px = 250.0; // [px] half-window of the global-shift search
   double slope_threshold = 0.35;        // K: |tan(angle between left and right flow)|
   double slope_min_flow_px = 3.0;       // [px] flows shorter than this skip the slope test
   double max_disparity_ratio = 1.6;     // parallax: d_t+1 / d_t within [1/r, r]

@@ -1,0 +1,150 @@
+// Tests of features, stereo/temporal matching and the quadrilateral closed-loop check.
+#include "fusionloc/stereo_vo/matching.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "stereo_fixtures.hpp"
+
+namespace fl::vo {
+namespace {
+
+// Features at given positions with given descriptor seeds (same seed = same descriptor).
+Features MakeFeatures(const std::vector<cv::Point2f>& pts, const std::vector<int>& seeds) {
+  Features f;
+  f.descriptors.create(static_cast<int>(pts.size()), 32, CV_8U);
+  for (size_t i = 0; i < pts.size(); ++i) {
+    cv::KeyPoint kp(pts[i], 31.f);
+    kp.octave = 0;
+    f.keypoints.push_back(kp);
+    std::mt19937 rng(static_cast<uint32_t>(seeds[i]));
+    for (int b = 0; b < 32; ++b) {
+      f.descriptors.at<uint8_t>(static_cast<int>(i), b) = static_cast<uint8_t>(rng() & 0xff);
+    }
+  }
+  f.BuildIndex(640, 480);
+  return f;
+}
+
+TEST(StereoVoMatching, StereoMatchingHonoursEpipolarAndDisparityLimits) {
+  MatchOptions opts;
+  opts.max_disparity_px = 100;
+  opts.epipolar_tolerance_px = 3;
+  // Left features 0..4 (seeds 1..5).
+  const Features left = MakeFeatures(
+      {{300, 100}, {300, 200}, {300, 300}, {300, 400}, {50, 50}}, {1, 2, 3, 4, 5});
+  // Right: 0 is a true match (d = 20, dy = 2); 1 is 5 px off the row; 2 has negative
+  // disparity; 3 has disparity 150 > d_max; 4 matches feature 4 with disparity 0 (not > 0).
+  const Features right = MakeFeatures(
+      {{280, 102}, {290, 205}, {310, 300}, {150, 400}, {50, 50}}, {1, 2, 3, 4, 5});
+  const std::vector<int> m = MatchStereo(left, right, opts);
+  ASSERT_EQ(m.size(), 5u);
+  EXPECT_EQ(m[0], 0);
+  EXPECT_EQ(m[1], -1) << "outside the epipolar tolerance";
+  EXPECT_EQ(m[2], -1) << "negative disparity";
+  EXPECT_EQ(m[3], -1) << "disparity above d_max";
+  EXPECT_EQ(m[4], -1) << "zero disparity";
+}
+
+TEST(StereoVoMatching, StereoMatchingIsMutualAndUsesDescriptors) {
+  MatchOptions opts;
+  // Two left features share a row; the right one resembles left 1 only.
+  const Features left = MakeFeatures({{300, 100}, {320, 100}}, {7, 8});
+  const Features right = MakeFeatures({{290, 100}}, {8});
+  const std::vector<int> m = MatchStereo(left, right, opts);
+  EXPECT_EQ(m[0], -1);
+  EXPECT_EQ(m[1], 0);
+}
+
+TEST(StereoVoMatching, TemporalMatchingSearchesOnlyThePredictedWindow) {
+  MatchOptions opts;
+  const Features a = MakeFeatures({{100, 100}, {200, 200}}, {1, 2});
+  const Features b = MakeFeatures({{130, 100}, {260, 200}}, {1, 2});
+  const std::vector<int> m = MatchTemporal(a, b, {{128, 101}, {200, 200}}, 20.0, opts);
+  EXPECT_EQ(m[0], 0);
+  EXPECT_EQ(m[1], -1) << "60 px away from the prediction, window 20 px";
+  const std::vector<int> none = MatchTemporal(a, b, {{-1, -1}, {-1, -1}}, 100.0, opts);
+  EXPECT_EQ(none[0], -1) << "no prediction: not searched";
+}
+
+// Four images of five scene points; quads are crafted consistent or not.
+TEST(StereoVoMatching, QuadrilateralCheckRejectsInconsistentMatches) {
+  MatchOptions opts;
+  opts.slope_threshold = 0.35;
+  std::vector<cv::Point2f> la, ra, lb, rb;
+  // 0: consistent (d 20 -> 21, flows (10,2) and (9,2)).
+  la.push_back({100, 100}); ra.push_back({80, 100}); lb.push_back({110, 102}); rb.push_back({89, 102});
+  // 1: consistent geometry, but the right temporal match lands on another feature.
+  la.push_back({300, 100}); ra.push_back({280, 100}); lb.push_back({305, 100}); rb.push_back({285, 100});
+  // 2: slope test fails: flows (4, 3) and (-3, 3) point different ways (d 20 -> 27).
+  la.push_back({400, 300}); ra.push_back({380, 300}); lb.push_back({404, 303}); rb.push_back({377, 303});
+  // 3: parallax fails: disparity 10 -> 21 (ratio 2.1 > 1.6).
+  la.push_back({500, 50}); ra.push_back({490, 50}); lb.push_back({501, 50}); rb.push_back({480, 50});
+  // 4: vertical flows disagree by 6 px (> epipolar tolerance).
+  la.push_back({200, 400}); ra.push_back({180, 400}); lb.push_back({210, 400}); rb.push_back({189, 406});
+  const std::vector<int> seeds = {1, 2, 3, 4, 5};
+  const Features fla = MakeFeatures(la, seeds), fra = MakeFeatures(ra, seeds),
+                 flb = MakeFeatures(lb, seeds), frb = MakeFeatures(rb, seeds);
+  const std::vector<int> stereo_a = {0, 1, 2, 3, 4};
+  const std::vector<int> stereo_b = {0, 1, 2, 3, 4};
+  const std::vector<int> temporal_left = {0, 1, 2, 3, 4};
+  std::vector<int> temporal_right = {0, 3, 2, 3, 4};  // 1 -> 3: the loop does not close
+  QuadStats stats;
+  std::vector<Quad> quads = CloseQuadrilaterals(fla, fra, flb, frb, stereo_a, stereo_b,
+                                                temporal_left, temporal_right, opts, &stats);
+  ASSERT_EQ(quads.size(), 1u);
+  EXPECT_EQ(quads[0].left_a, 0);
+  EXPECT_EQ(quads[0].right_b, 0);
+  EXPECT_EQ(stats.candidates, 5);
+  EXPECT_EQ(stats.not_closed, 1);
+  EXPECT_EQ(stats.slope_rejected, 2);
+  EXPECT_EQ(stats.parallax_rejected, 1);
+  // Closing the loop of point 1 makes it pass.
+  temporal_right[1] = 1;
+  quads = CloseQuadrilaterals(fla, fra, flb, frb, stereo_a, stereo_b, temporal_left,
+                              temporal_right, opts, &stats);
+  EXPECT_EQ(quads.size(), 2u);
+  // A missing stereo match at b breaks the loop too.
+  const std::vector<int> stereo_b_missing = {-1, 1, 2, 3, 4};
+  quads = CloseQuadrilaterals(fla, fra, flb, frb, stereo_a, stereo_b_missing, temporal_left,
+                              temporal_right, opts, &stats);
+  EXPECT_EQ(quads.size(), 1u);
+  EXPECT_EQ(quads[0].left_a, 1);
+}
+
+TEST(StereoVoMatching, FeaturesAreSpreadOverTheGrid) {
+  const cv::Mat tex = fl::test::stereo::Texture(640, 480, 3);
+  FeatureOptions opts;
+  opts.cell_size_px = 40;
+  opts.features_per_cell = 3;
+  FeatureExtractor extractor(opts);
+  Features f;
+  extractor.Extract(tex, &f);
+  ASSERT_GT(f.size(), 200);
+  ASSERT_EQ(f.descriptors.rows, f.size());
+  std::vector<int> per_cell(16 * 12, 0);
+  for (const auto& kp : f.keypoints) {
+    ++per_cell[static_cast<size_t>(static_cast<int>(kp.pt.y) / 40 * 16 +
+                                   static_cast<int>(kp.pt.x) / 40)];
+  }
+  int covered = 0;
+  for (int c : per_cell) {
+    EXPECT_LE(c, 3);
+    covered += c > 0 ? 1 : 0;
+  }
+  EXPECT_GT(covered, 0.8 * 16 * 12) << "features should cover the image evenly";
+}
+
+TEST(StereoVoMatching, OptionsValidateWithClearMessages) {
+  MatchOptions m;
+  EXPECT_TRUE(m.Validate().ok());
+  m.max_disparity_px = 0;
+  EXPECT_NE(m.Validate().message().find("max_disparity_px"), std::string::npos);
+  FeatureOptions f;
+  f.pyramid_levels = 0;
+  EXPECT_NE(f.Validate().message().find("pyramid_levels"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace fl::vo

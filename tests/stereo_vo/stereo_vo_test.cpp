@@ -1,0 +1,224 @@
+// Tests of fl::vo::StereoVo on synthetic stereo pairs of a textured plane: tracking, keyframe
+// factors in the base frame, and every bad-input case (sizes, calibration, black / saturated /
+// textureless frames, repeated time stamps, gaps).
+#include "fusionloc/stereo_vo/stereo_vo.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <filesystem>
+
+#include "fusionloc/common/yaml_options.hpp"
+#include "stereo_fixtures.hpp"
+#include "test_paths.hpp"
+
+namespace fl::vo {
+namespace {
+
+using fl::test::stereo::PlanePair;
+using fl::test::stereo::TestCalibration;
+using fl::test::stereo::Texture;
+
+constexpr Utime kT0 = 1000000000;
+constexpr Utime kDt = 100000;  // 10 Hz
+constexpr double kDepth = 5.0;    // [m] plane distance
+constexpr double kStep = 0.05;    // [m] camera x per frame (5 px of image motion)
+
+class StereoVoTest : public ::testing::Test {
+ protected:
+  StereoVoTest() : calib_(TestCalibration()), texture_(Texture(900, 700, 17)) {}
+  // The pair seen after the camera moved k steps along its x axis.
+  void Pair(int k, cv::Mat* left, cv::Mat* right) const {
+    PlanePair(texture_, calib_, kDepth, k * kStep, 0.0, left, right);
+  }
+  StereoCalibration calib_;
+  cv::Mat texture_;
+};
+
+TEST_F(StereoVoTest, TracksSidewaysMotionOfAPlane) {
+  StereoVoOptions opts;
+  opts.keyframe_translation_m = 0.12;
+  StereoVo vo(opts, calib_);
+  cv::Mat l, r;
+  int factors = 0;
+  for (int k = 0; k <= 6; ++k) {
+    Pair(k, &l, &r);
+    const StereoVoResult res = vo.AddStereoFrame(kT0 + k * kDt, l, r);
+    if (k == 0) {
+      EXPECT_EQ(res.state, TrackingState::kInitialized) << res.message;
+      EXPECT_TRUE(res.is_keyframe);
+      EXPECT_GT(res.keyframe_points.size(), 100u);
+      ASSERT_EQ(res.keyframe_points.size(), res.keyframe_intensities.size());
+      for (const auto& p : res.keyframe_points) EXPECT_NEAR(p.z(), kDepth, 0.1);
+      continue;
+    }
+    ASSERT_EQ(res.state, TrackingState::kTracked) << res.message;
+    EXPECT_GT(res.stats.inliers, 50);
+    EXPECT_NEAR(res.T_prev_camera.translation().x(), kStep, 0.002);
+    EXPECT_NEAR(res.T_prev_camera.translation().y(), 0.0, 0.002);
+    EXPECT_NEAR(res.T_prev_camera.translation().z(), 0.0, 0.01);
+    // Base frame: camera x (right) is base -y.
+    EXPECT_NEAR(res.T_world_base.translation().y(), -k * kStep, 0.005 * k);
+    if (res.factor) {
+      ++factors;
+      const KeyframeFactor& f = *res.factor;
+      EXPECT_EQ(f.keyframe_id_j, f.keyframe_id_i + 1);
+      EXPECT_LT(f.utime_i, f.utime_j);
+      EXPECT_EQ(f.utime_j, res.utime);
+      // 3 frames per keyframe (0.15 m >= 0.12 m), motion along base -y.
+      EXPECT_NEAR(f.T_i_j.translation().y(), -3 * kStep, 0.01);
+      EXPECT_NEAR(f.T_i_j.translation().x(), 0.0, 0.03);
+      // Information: symmetric, positive definite; sideways (y) best observed.
+      EXPECT_LT((f.information - f.information.transpose()).norm(),
+                1e-9 * f.information.norm());
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(f.information);
+      EXPECT_GT(eig.eigenvalues().minCoeff(), 0.0);
+      EXPECT_GT(f.information(1, 1), f.information(0, 0));
+    }
+  }
+  EXPECT_EQ(factors, 2);
+}
+
+TEST_F(StereoVoTest, RejectsImagesThatDoNotMatchTheCalibration) {
+  StereoVo vo(StereoVoOptions(), calib_);
+  cv::Mat l, r;
+  Pair(0, &l, &r);
+  const cv::Mat small = l(cv::Rect(0, 0, 320, 240)).clone();
+  StereoVoResult res = vo.AddStereoFrame(kT0, l, small);
+  EXPECT_EQ(res.state, TrackingState::kRejected);
+  EXPECT_NE(res.message.find("do not match the calibration"), std::string::npos) << res.message;
+  res = vo.AddStereoFrame(kT0, small, small);
+  EXPECT_EQ(res.state, TrackingState::kRejected);
+  res = vo.AddStereoFrame(kT0, cv::Mat(), r);
+  EXPECT_EQ(res.state, TrackingState::kRejected);
+  EXPECT_NE(res.message.find("empty"), std::string::npos);
+  cv::Mat float_image;
+  l.convertTo(float_image, CV_32F);
+  res = vo.AddStereoFrame(kT0, float_image, float_image);
+  EXPECT_EQ(res.state, TrackingState::kRejected);
+  EXPECT_NE(res.message.find("pixel type"), std::string::npos);
+  // The rejections changed nothing: the same time stamp still initializes.
+  res = vo.AddStereoFrame(kT0, l, r);
+  EXPECT_EQ(res.state, TrackingState::kInitialized) << res.message;
+  // BGR input is converted.
+  cv::Mat lc, rc;
+  Pair(1, &l, &r);
+  cv::cvtColor(l, lc, cv::COLOR_GRAY2BGR);
+  cv::cvtColor(r, rc, cv::COLOR_GRAY2BGR);
+  res = vo.AddStereoFrame(kT0 + kDt, lc, rc);
+  EXPECT_EQ(res.state, TrackingState::kTracked) << res.message;
+}
+
+TEST_F(StereoVoTest, RejectsCalibrationThatIsNotRectifiedOrInvalid) {
+  StereoCalibration c = calib_;
+  c.rectified = false;
+  EXPECT_NE(c.Validate().message().find("not rectified"), std::string::npos);
+  EXPECT_THROW(StereoVo(StereoVoOptions(), c), std::invalid_argument);
+  c = calib_;
+  c.baseline = 0;
+  EXPECT_NE(c.Validate().message().find("baseline"), std::string::npos);
+  c = calib_;
+  c.fx = -1;
+  EXPECT_FALSE(c.Validate().ok());
+  c = calib_;
+  c.T_base_camera.linear() *= 2.0;
+  EXPECT_NE(c.Validate().message().find("rigid"), std::string::npos);
+  StereoVoOptions o;
+  o.matching.max_disparity_px = -3;
+  try {
+    StereoVo vo(o, calib_);
+    FAIL() << "expected invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("max_disparity_px"), std::string::npos);
+  }
+}
+
+TEST_F(StereoVoTest, BlackSaturatedAndTexturelessFramesAreNotTrackedAndTrackingRecovers) {
+  StereoVo vo(StereoVoOptions(), calib_);
+  cv::Mat l, r;
+  Pair(0, &l, &r);
+  ASSERT_EQ(vo.AddStereoFrame(kT0, l, r).state, TrackingState::kInitialized);
+  Pair(1, &l, &r);
+  ASSERT_EQ(vo.AddStereoFrame(kT0 + kDt, l, r).state, TrackingState::kTracked);
+
+  const cv::Mat black(calib_.height, calib_.width, CV_8UC1, cv::Scalar(0));
+  const cv::Mat white(calib_.height, calib_.width, CV_8UC1, cv::Scalar(255));
+  const cv::Mat flat(calib_.height, calib_.width, CV_8UC1, cv::Scalar(120));
+  StereoVoResult res = vo.AddStereoFrame(kT0 + 2 * kDt, black, black);
+  EXPECT_EQ(res.state, TrackingState::kNotTracked);
+  EXPECT_NE(res.message.find("black"), std::string::npos) << res.message;
+  EXPECT_FALSE(res.factor.has_value());
+  res = vo.AddStereoFrame(kT0 + 3 * kDt, white, white);
+  EXPECT_EQ(res.state, TrackingState::kNotTracked);
+  EXPECT_NE(res.message.find("saturated"), std::string::npos) << res.message;
+  res = vo.AddStereoFrame(kT0 + 4 * kDt, flat, flat);
+  EXPECT_EQ(res.state, TrackingState::kNotTracked);
+  EXPECT_NE(res.message.find("low texture"), std::string::npos) << res.message;
+  // The pose is held while not tracked.
+  EXPECT_NEAR(res.T_world_base.translation().y(), -kStep, 0.005);
+
+  // Frame 5 is matched against frame 1 (the last good one): 4 steps of motion in one go.
+  Pair(5, &l, &r);
+  res = vo.AddStereoFrame(kT0 + 5 * kDt, l, r);
+  ASSERT_EQ(res.state, TrackingState::kTracked) << res.message;
+  EXPECT_FALSE(res.new_segment);
+  EXPECT_NEAR(res.T_prev_camera.translation().x(), 4 * kStep, 0.005);
+  EXPECT_NEAR(res.T_world_base.translation().y(), -5 * kStep, 0.01);
+}
+
+TEST_F(StereoVoTest, RepeatedOrBackwardTimeStampsAreRejected) {
+  StereoVo vo(StereoVoOptions(), calib_);
+  cv::Mat l, r;
+  Pair(0, &l, &r);
+  ASSERT_EQ(vo.AddStereoFrame(kT0, l, r).state, TrackingState::kInitialized);
+  Pair(1, &l, &r);
+  StereoVoResult res = vo.AddStereoFrame(kT0, l, r);
+  EXPECT_EQ(res.state, TrackingState::kRejected);
+  EXPECT_NE(res.message.find("not after the previous"), std::string::npos) << res.message;
+  res = vo.AddStereoFrame(kT0 - kDt, l, r);
+  EXPECT_EQ(res.state, TrackingState::kRejected);
+  res = vo.AddStereoFrame(kT0 + kDt, l, r);
+  EXPECT_EQ(res.state, TrackingState::kTracked) << res.message;
+}
+
+TEST_F(StereoVoTest, AGapLongerThanMaxGapStartsANewSegment) {
+  StereoVoOptions opts;
+  opts.max_gap_s = 0.5;
+  StereoVo vo(opts, calib_);
+  cv::Mat l, r;
+  Pair(0, &l, &r);
+  ASSERT_EQ(vo.AddStereoFrame(kT0, l, r).state, TrackingState::kInitialized);
+  Pair(1, &l, &r);
+  const StereoVoResult res = vo.AddStereoFrame(kT0 + 2000000, l, r);
+  EXPECT_EQ(res.state, TrackingState::kInitialized);
+  EXPECT_TRUE(res.new_segment);
+  EXPECT_EQ(res.segment, 1);
+  EXPECT_TRUE(res.is_keyframe);
+  EXPECT_FALSE(res.factor.has_value()) << "no factor across an unknown gap";
+  EXPECT_NE(res.message.find("new segment"), std::string::npos) << res.message;
+}
+
+TEST_F(StereoVoTest, UnrelatedImagesAreNotTrackedWithoutAFactor) {
+  StereoVo vo(StereoVoOptions(), calib_);
+  cv::Mat l, r;
+  Pair(0, &l, &r);
+  ASSERT_EQ(vo.AddStereoFrame(kT0, l, r).state, TrackingState::kInitialized);
+  const cv::Mat other = Texture(900, 700, 99);
+  PlanePair(other, calib_, kDepth, 0.0, 0.0, &l, &r);
+  const StereoVoResult res = vo.AddStereoFrame(kT0 + kDt, l, r);
+  EXPECT_EQ(res.state, TrackingState::kNotTracked) << res.message;
+  EXPECT_FALSE(res.factor.has_value());
+}
+
+TEST(StereoVoOptionsTest, ConfigFileLoadsAndDefaultsValidate) {
+  EXPECT_TRUE(StereoVoOptions().Validate().ok());
+  const std::string path = fl::test::SourceDir() + "/config/stereo_vo.yaml";
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no " << path;
+  const StereoVoOptions o = fl::LoadYamlFile<StereoVoOptions>(path);
+  EXPECT_TRUE(o.Validate().ok());
+  EXPECT_THROW(fl::LoadYamlString<StereoVoOptions>("matching: {slope_treshold: 0.3}\n"),
+               fl::ConfigError);
+}
+
+}  // namespace
+}  // namespace fl::vo
