@@ -116,6 +116,10 @@ Status FusionOptions::Validate() const {
       !(odom_sigma_theta_per_m >= 0.0)) {
     return Status::Error("odom_sigma_*_min must be > 0 and the per-unit terms >= 0");
   }
+  if (!(chain_sigma_xy_min > 0.0) || !(chain_sigma_theta_min > 0.0) ||
+      !(chain_sigma_xy_per_m >= 0.0) || !(chain_sigma_theta_per_rad >= 0.0)) {
+    return Status::Error("chain_sigma_*_min must be > 0 and the per-unit terms >= 0");
+  }
   if (!(odom_max_gap_s > 0.0)) return Status::Error("odom_max_gap_s must be > 0");
   if (max_pending_factors < 1) return Status::Error("max_pending_factors must be >= 1");
   return Status::Ok();
@@ -238,6 +242,25 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     const Eigen::Matrix3d sqrt_info = sigma.cwiseInverse().asDiagonal();
     prior.cost.reset(Se2PriorCost::Create(node.state, sqrt_info));
     AddGraphFactor(std::move(prior));
+  }
+  if (index > 0 && options_.laser_chain_factors) {
+    const Node& prev = nodes_[index - 1];
+    const Pose2 motion = prev.T_map_base_rbpf.between(node.T_map_base_rbpf);
+    const double dist = std::hypot(motion.x, motion.y);
+    const double sxy = options_.chain_sigma_xy_min + options_.chain_sigma_xy_per_m * dist;
+    const double sth = options_.chain_sigma_theta_min +
+                       options_.chain_sigma_theta_per_rad * std::fabs(motion.theta);
+    Factor chain;
+    chain.i = index - 1;
+    chain.j = index;
+    chain.T_i_j = motion;
+    chain.information =
+        Eigen::Vector3d(1 / (sxy * sxy), 1 / (sxy * sxy), 1 / (sth * sth)).asDiagonal();
+    chain.source = FactorSource::kLaser;
+    chain.cost.reset(Se2BetweenCost::Create(
+        ToVector(motion), Eigen::Vector3d(1 / sxy, 1 / sxy, 1 / sth).asDiagonal()));
+    chain.loss = robust_loss_;
+    AddGraphFactor(std::move(chain));
   }
   AttachPendingFactors();
   AddOdometryFactors();

@@ -17,6 +17,7 @@ using fl::test::MakeRoundedSquareSim;
 FusionOptions TestOptions() {
   FusionOptions o;
   o.full_solve_every_n_nodes = 0;  // the tests decide when to solve
+  o.laser_chain_factors = false;   // tested on its own (the fixtures' RBPF poses drift)
   return o;
 }
 
@@ -377,6 +378,38 @@ TEST(FusionFactorGraph, VisionInformationIsMarginalisedToThePlane) {
   EXPECT_EQ(planar(0, 0), 4);
   EXPECT_EQ(planar(2, 2), 16);
   EXPECT_EQ(planar(0, 2), 1);
+}
+
+TEST(FusionFactorGraph, LaserChainFactorsConstrainEveryNode) {
+  FusionSimOptions so;
+  so.rbpf_heading_bias = 0.0;  // RBPF poses = truth
+  so.loop_closure = false;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FusionOptions o = TestOptions();
+  o.laser_chain_factors = true;
+  FactorGraphFusion fusion(o);
+  for (const auto& p : d.rbpf) ASSERT_TRUE(fusion.AddLaserPose(p.utime, p.T_map_base).ok());
+  EXPECT_EQ(fusion.num_factors(), static_cast<int>(d.rbpf.size()));  // prior + chain
+  // A vision factor (sigma 0.1 m) that disagrees by 0.3 m over 5 s: the chain (about 0.1 m
+  // plus heading freedom over those 50 steps) gives way smoothly: no node jumps.
+  RelativePoseFactor f;
+  f.utime_i = d.truth[10].utime;
+  f.utime_j = d.truth[60].utime;
+  Pose2 wrong = d.truth[10].T_map_base.between(d.truth[60].T_map_base);
+  wrong.x += 0.3;
+  f.T_i_j = wrong.ToIsometry3();
+  f.information = Eigen::Matrix<double, 6, 6>::Identity() * 100;
+  f.source = FactorSource::kVision;
+  ASSERT_TRUE(fusion.AddFactor(f).ok());
+  fusion.FullSolve();
+  const auto traj = fusion.Trajectory();
+  EXPECT_LT(MaxError(traj, d.truth), 0.29);  // less than the 0.3 m it claims
+  EXPECT_GT(MaxError(traj, d.truth), 0.01);  // it did pull
+  for (size_t k = 1; k < traj.size(); ++k) {
+    const double step = PositionError(traj[k].T_map_base, traj[k - 1].T_map_base);
+    const double true_step = PositionError(d.truth[k].T_map_base, d.truth[k - 1].T_map_base);
+    EXPECT_LT(std::fabs(step - true_step), 0.02) << k;
+  }
 }
 
 TEST(FusionFactorGraph, OptionsValidateWithClearErrors) {

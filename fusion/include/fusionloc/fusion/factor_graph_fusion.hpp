@@ -35,6 +35,11 @@
 // singular or indefinite information, or both times on the same node. A rejected input never
 // changes the graph.
 //
+// LASER CHAIN: the RBPF publishes a scan-matched pose per scan but ICP factors only between
+// its keyframes; with laser_chain_factors every pair of consecutive RBPF poses also becomes a
+// between-factor (noise model chain_sigma_*, robust loss: the RBPF pose can jump when the
+// filter resamples or its graph corrects), so every node is constrained.
+//
 // WHEEL ODOMETRY: integrated poses T_odom_base; for each pair of consecutive nodes the
 // odometry pose is interpolated at both node times and the relative motion becomes a
 // between-factor with a motion-proportional noise model (options odom_*). Odometry later than
@@ -102,6 +107,13 @@ struct FusionOptions {
   double robust_loss_scale = 3.0;     // [sigma] whitened error where the loss bends
   double prior_sigma_xy = 0.001;      // [m] prior on the first node (gauge)
   double prior_sigma_theta = 0.001;   // [rad]
+  // RBPF pose chain: a between-factor from every pair of consecutive laser poses (the RBPF's
+  // scan-matched motion), so that every node is constrained even between RBPF keyframes.
+  bool laser_chain_factors = true;
+  double chain_sigma_xy_min = 0.01;        // [m] per node pair
+  double chain_sigma_xy_per_m = 0.05;      // [m/m]
+  double chain_sigma_theta_min = 0.005;    // [rad]
+  double chain_sigma_theta_per_rad = 0.05; // [rad/rad]
   bool use_wheel_odometry = false;    // add odometry between-factors (off: the RBPF already
                                       // fuses the wheel odometry; on would count it twice)
   double odom_sigma_xy_min = 0.02;    // [m] odometry noise floor per node pair
@@ -126,6 +138,11 @@ struct FusionOptions {
     a->Visit("robust_loss_scale", &robust_loss_scale);
     a->Visit("prior_sigma_xy", &prior_sigma_xy);
     a->Visit("prior_sigma_theta", &prior_sigma_theta);
+    a->Visit("laser_chain_factors", &laser_chain_factors);
+    a->Visit("chain_sigma_xy_min", &chain_sigma_xy_min);
+    a->Visit("chain_sigma_xy_per_m", &chain_sigma_xy_per_m);
+    a->Visit("chain_sigma_theta_min", &chain_sigma_theta_min);
+    a->Visit("chain_sigma_theta_per_rad", &chain_sigma_theta_per_rad);
     a->Visit("use_wheel_odometry", &use_wheel_odometry);
     a->Visit("odom_sigma_xy_min", &odom_sigma_xy_min);
     a->Visit("odom_sigma_xy_per_m", &odom_sigma_xy_per_m);
