@@ -46,6 +46,10 @@ Status GridOptions::Validate() const {
     return Status::Error("grid.log_odds_clamp must be > grid.log_odds_occupied and <= 300");
   }
   FL_RETURN_IF_ERROR(NonNegative("grid.log_odds_occupied", log_odds_occupied));
+  if (!(log_odds_free < log_odds_occupied) || !(log_odds_free > -log_odds_clamp)) {
+    return Status::Error("grid.log_odds_free must be below grid.log_odds_occupied and above "
+                         "-grid.log_odds_clamp (e.g. 0.0)");
+  }
   if (free_space_beam_step < 1) return Status::Error("grid.free_space_beam_step must be >= 1");
   return Status::Ok();
 }

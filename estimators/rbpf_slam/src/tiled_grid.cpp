@@ -26,6 +26,16 @@ TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
   miss_ = ScaleLogOdds(options.log_odds_miss);
   clamp_ = ScaleLogOdds(options.log_odds_clamp);
   occ_threshold_ = ScaleLogOdds(options.log_odds_occupied);
+  free_threshold_ = ScaleLogOdds(options.log_odds_free);
+  const int side = 2 * radius_ + 1;
+  dist_table_.assign(static_cast<size_t>(side) * side, static_cast<uint8_t>(dist_max_));
+  for (int dy = -radius_; dy <= radius_; ++dy) {
+    for (int dx = -radius_; dx <= radius_; ++dx) {
+      const int d = static_cast<int>(std::lround(std::sqrt(dx * dx + dy * dy) * kDistScale));
+      dist_table_[static_cast<size_t>(dy + radius_) * side + (dx + radius_)] =
+          static_cast<uint8_t>(std::min(d, dist_max_));
+    }
+  }
   for (int dy = -radius_; dy <= radius_; ++dy) {
     for (int dx = -radius_; dx <= radius_; ++dx) {
       const int d = static_cast<int>(std::lround(std::sqrt(dx * dx + dy * dy) * kDistScale));
@@ -96,7 +106,7 @@ float TiledGrid::LogOdds(int cx, int cy) const {
 
 bool TiledGrid::IsOccupied(int cx, int cy) const {
   const Tile* t = TileAt(cx >> kTileBits, cy >> kTileBits);
-  return t && t->log_odds[LocalIndex(cx, cy)] > occ_threshold_;
+  return t && t->dist[LocalIndex(cx, cy)] == 0;
 }
 
 double TiledGrid::CellDistance(int cx, int cy) const {
@@ -109,13 +119,14 @@ const Tile* TiledGrid::TileAddress(int cx, int cy) const {
 
 void TiledGrid::UpdateCell(int cx, int cy, int delta_scaled) {
   Tile* t = MutableTile(cx >> kTileBits, cy >> kTileBits);
-  int16_t& l = t->log_odds[LocalIndex(cx, cy)];
-  const bool was = l > occ_threshold_;
+  const int idx = LocalIndex(cx, cy);
+  int16_t& l = t->log_odds[idx];
+  const bool was = t->dist[idx] == 0;
   int v = l + delta_scaled;
   v = std::max<int>(-clamp_, std::min<int>(clamp_, v));
   if (v == 0) v = delta_scaled > 0 ? 1 : -1;  // 0 means "unknown": an observed cell never is
   l = static_cast<int16_t>(v);
-  const bool now = v > occ_threshold_;
+  const bool now = was ? v >= free_threshold_ : v > occ_threshold_;
   if (now != was) {
     t->occupied += now ? 1 : -1;
     if (now) {
@@ -135,24 +146,34 @@ void TiledGrid::OnBecameOccupied(int cx, int cy) {
 
 void TiledGrid::OnBecameFree(int cx, int cy) {
   // Recompute the field inside the radius from the obstacles within twice the radius.
-  std::vector<std::pair<int, int>> obstacles;
+  SetRawDist(cx, cy, 1);  // no longer an obstacle; recomputed below
+  obstacles_.clear();
   const int r2 = 2 * radius_;
   for (int y = cy - r2; y <= cy + r2; ++y) {
-    for (int x = cx - r2; x <= cx + r2; ++x) {
-      if (IsOccupied(x, y)) obstacles.emplace_back(x, y);
+    for (int x = cx - r2; x <= cx + r2;) {
+      const Tile* t = TileAt(x >> kTileBits, y >> kTileBits);
+      const int tile_end = ((x >> kTileBits) + 1) << kTileBits;  // first x of the next tile
+      const int stop = std::min(cx + r2 + 1, tile_end);
+      if (t && t->occupied > 0) {
+        for (; x < stop; ++x) {
+          if (t->dist[LocalIndex(x, y)] == 0) obstacles_.emplace_back(x, y);
+        }
+      }
+      x = stop;
     }
   }
+  const int side = 2 * radius_ + 1;
   for (const Offset& o : disk_) {
     const int x = cx + o.dx, y = cy + o.dy;
-    if (RawDist(x, y) == dist_max_) continue;  // saturated: removing an obstacle cannot lower it
+    const int cur = RawDist(x, y);
+    if (cur == dist_max_ || cur == 0) continue;  // saturated (cannot drop) or an obstacle
     int best = dist_max_;
-    for (const auto& ob : obstacles) {
+    for (const auto& ob : obstacles_) {
       const int ddx = ob.first - x, ddy = ob.second - y;
-      if (std::abs(ddx) > radius_ || std::abs(ddy) > radius_) continue;
-      const int d = static_cast<int>(std::lround(std::sqrt(ddx * ddx + ddy * ddy) * kDistScale));
-      best = std::min(best, d);
+      if (ddx < -radius_ || ddx > radius_ || ddy < -radius_ || ddy > radius_) continue;
+      best = std::min<int>(best, dist_table_[static_cast<size_t>(ddy + radius_) * side + (ddx + radius_)]);
     }
-    if (best != RawDist(x, y)) SetRawDist(x, y, best);
+    if (best != cur) SetRawDist(x, y, best);
   }
 }
 
@@ -183,12 +204,12 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
         ctx = tx;
         cty = ty;
       }
-      int16_t& l = tile->log_odds[LocalIndex(x, y)];
-      const bool was = l > occ_threshold_;
+      const int idx = LocalIndex(x, y);
+      int16_t& l = tile->log_odds[idx];
       int v = std::max<int>(-clamp_, l + miss_);
       if (v == 0) v = -1;
       l = static_cast<int16_t>(v);
-      if (was && v <= occ_threshold_) {
+      if (v < free_threshold_ && tile->dist[idx] == 0) {
         tile->occupied -= 1;
         OnBecameFree(x, y);
       }

@@ -18,7 +18,9 @@ struct GridOptions {
   double log_odds_hit = 0.9;       // [-] log-odds added to a beam's end cell
   double log_odds_miss = -0.3;     // [-] log-odds added to every cell a beam passes through
   double log_odds_clamp = 4.0;     // [-] |log-odds| is clamped to this (keeps the map adaptable)
-  double log_odds_occupied = 0.5;  // [-] a cell is an obstacle when its log-odds exceeds this
+  double log_odds_occupied = 0.5;  // [-] a cell becomes an obstacle when its log-odds exceeds this
+  double log_odds_free = 0.45;     // [-] ... and stops being one when it falls below this
+                                   //     (hysteresis: keeps the likelihood field from flickering)
   int free_space_beam_step = 1;    // [-] clear free space along every n-th beam (1 = all beams)
 
   template <class A>
@@ -30,6 +32,7 @@ struct GridOptions {
     a->Visit("log_odds_miss", &log_odds_miss);
     a->Visit("log_odds_clamp", &log_odds_clamp);
     a->Visit("log_odds_occupied", &log_odds_occupied);
+    a->Visit("log_odds_free", &log_odds_free);
     a->Visit("free_space_beam_step", &free_space_beam_step);
   }
   Status Validate() const;

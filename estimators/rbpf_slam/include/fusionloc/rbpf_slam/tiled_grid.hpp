@@ -11,6 +11,8 @@
 // 1/kDistScale cells, saturated at the field radius). The distance field is updated locally
 // whenever a cell becomes or stops being an obstacle, so the likelihood field of eq. 3,
 // p(z) ∝ z_hit exp(-d²/2σ²) + z_rand, is a table lookup for any particle at any time.
+// A cell is an obstacle (distance 0) from when its log-odds exceeds log_odds_occupied until it
+// falls below log_odds_free.
 //
 // Cell (cx, cy) covers x in [cx*res, (cx+1)*res), likewise y; its centre is (cx+0.5)*res.
 #pragma once
@@ -19,6 +21,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "fusionloc/common/geometry.hpp"
@@ -97,7 +100,8 @@ class TiledGrid {
   double inv_res_;
   int radius_;       // field radius in cells
   int dist_max_;     // stored value meaning "radius or farther"
-  int16_t hit_, miss_, clamp_, occ_threshold_;
+  int16_t hit_, miss_, clamp_, occ_threshold_, free_threshold_;
+  std::vector<uint8_t> dist_table_;  // scaled distance of offset (dx, dy), |dx|, |dy| <= radius
   // Precomputed offsets within the field radius and their scaled distances.
   struct Offset {
     int dx, dy, d;
@@ -107,6 +111,7 @@ class TiledGrid {
   int tx0_ = 0, ty0_ = 0, ntx_ = 0, nty_ = 0;
   std::vector<std::shared_ptr<Tile>> tiles_;
   std::shared_ptr<Tile> empty_;  // prototype of a fresh tile
+  std::vector<std::pair<int, int>> obstacles_;  // scratch buffer of OnBecameFree
 };
 
 }  // namespace fl::rbpf
