@@ -526,16 +526,28 @@ SolveSummary FactorGraphFusion::SolveWindow(int first) {
   FillUnconstrained(first);
   latest_covariance_.setZero();
   double* newest = nodes_.back().state.data();
-  if (options_.compute_covariance && problem.HasParameterBlock(newest) &&
-      !problem.IsParameterBlockConstant(newest)) {
-    ceres::Covariance::Options copts;
-    copts.num_threads = 1;
-    ceres::Covariance covariance(copts);
-    std::vector<std::pair<const double*, const double*>> blocks = {{newest, newest}};
-    if (covariance.Compute(blocks, &problem)) {
-      double c[9];
-      covariance.GetCovarianceBlockInTangentSpace(newest, newest, c);
-      latest_covariance_ = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(c);
+  if (options_.compute_covariance && problem.HasParameterBlock(newest) && n - first <= 100) {
+    // Marginal covariance of the newest node: the (x, y, theta) block of (J^T J)^-1 over the
+    // window's free nodes (dense; the window is small). Left zero if J^T J is singular.
+    ceres::Problem::EvaluateOptions eval;
+    for (int k = first; k < n; ++k) {
+      double* block = nodes_[k].state.data();
+      if (problem.HasParameterBlock(block)) eval.parameter_blocks.push_back(block);
+    }
+    ceres::CRSMatrix jac;
+    if (problem.Evaluate(eval, nullptr, nullptr, nullptr, &jac)) {
+      Eigen::MatrixXd j = Eigen::MatrixXd::Zero(jac.num_rows, jac.num_cols);
+      for (int r = 0; r < jac.num_rows; ++r) {
+        for (int q = jac.rows[r]; q < jac.rows[r + 1]; ++q) j(r, jac.cols[q]) = jac.values[q];
+      }
+      const Eigen::MatrixXd h = j.transpose() * j;
+      Eigen::LLT<Eigen::MatrixXd> llt(h);
+      if (llt.info() == Eigen::Success) {
+        Eigen::MatrixXd e = Eigen::MatrixXd::Zero(h.rows(), 3);
+        e.bottomRows(3).setIdentity();  // the newest node is the last block
+        const Eigen::MatrixXd x = llt.solve(e);
+        if (x.allFinite()) latest_covariance_ = x.bottomRows(3);
+      }
     }
   }
   summary.time_ms = MsSince(t0);

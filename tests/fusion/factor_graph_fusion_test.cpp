@@ -412,6 +412,22 @@ TEST(FusionFactorGraph, LaserChainFactorsConstrainEveryNode) {
   }
 }
 
+TEST(FusionFactorGraph, NewestNodeCovarianceAddsPriorAndChainNoise) {
+  FusionOptions o = TestOptions();
+  o.laser_chain_factors = true;
+  o.robust_loss = "none";
+  FactorGraphFusion fusion(o);
+  ASSERT_TRUE(fusion.AddLaserPose(1000000, Pose2(1.0, 2.0, 0.3)).ok());
+  ASSERT_TRUE(fusion.AddLaserPose(1100000, Pose2(1.0, 2.0, 0.3)).ok());  // standing still
+  fusion.Update();
+  // Standing still (no lever arm): covariance = prior + one chain step, diagonal.
+  const Eigen::Matrix3d c = fusion.latest_covariance();
+  const double sxy = o.chain_sigma_xy_min, sth = o.chain_sigma_theta_min;
+  EXPECT_NEAR(c(0, 0), o.prior_sigma_xy * o.prior_sigma_xy + sxy * sxy, 1e-9);
+  EXPECT_NEAR(c(2, 2), o.prior_sigma_theta * o.prior_sigma_theta + sth * sth, 1e-9);
+  EXPECT_NEAR(c(0, 1), 0.0, 1e-12);
+}
+
 TEST(FusionFactorGraph, OptionsValidateWithClearErrors) {
   FusionOptions o;
   EXPECT_TRUE(o.Validate().ok());
