@@ -326,6 +326,13 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       velocity_dt_s_ > 0 && dt_s / velocity_dt_s_ > 0.75 && dt_s / velocity_dt_s_ < 1.33;
   std::vector<Quad> quads;
   QuadStats qstats;
+  std::vector<StereoCorrespondence> corr;
+  std::vector<int> corr_quad;  // correspondence -> quad index
+  RansacResult ransac;
+  std::vector<Quad> best_quads;
+  std::vector<StereoCorrespondence> best_corr;
+  std::vector<int> best_corr_quad;
+  QuadStats best_stats;
   // Attempt 0: constant-velocity prediction (narrow windows). Attempt 1: the global image
   // shift (median flow of a wide search on a subset, which captures fast turns), then narrow
   // windows around the shifted positions; without enough wide matches, wide windows.
@@ -386,46 +393,56 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
     const std::vector<int> tr = MatchTemporal(prev.fr, cur->fr, pred_r, radius, options_.matching);
     quads = CloseQuadrilaterals(prev.fl, prev.fr, cur->fl, cur->fr, prev.stereo, cur->stereo, tl,
                                 tr, options_.matching, &qstats);
-    if (static_cast<int>(quads.size()) >= 2 * options_.min_quads) break;  // enough
+    // Correspondences (left corners as detected, right x sub-pixel, see RefineStereo) and the
+    // RANSAC motion; a failed attempt (e.g. consistent but wrong matches on repetitive
+    // texture under a bad prediction) falls through to the global-shift search.
+    corr.clear();
+    corr_quad.clear();
+    for (size_t k = 0; k < quads.size(); ++k) {
+      const cv::Point2f la = prev.fl.keypoints[static_cast<size_t>(quads[k].left_a)].pt;
+      const cv::Point2f lb = cur->fl.keypoints[static_cast<size_t>(quads[k].left_b)].pt;
+      const float ra_x = prev.right_x[static_cast<size_t>(quads[k].left_a)];
+      const float rb_x = cur->right_x[static_cast<size_t>(quads[k].left_b)];
+      const double da = la.x - ra_x, db = lb.x - rb_x;
+      if (!(da > 0 && db > 0)) continue;
+      StereoCorrespondence c;
+      // Rectified pair: the left row is the point's row (the right one was aligned to it).
+      c.obs_a = Eigen::Vector3d(la.x, la.y, ra_x);
+      c.obs_b = Eigen::Vector3d(lb.x, lb.y, rb_x);
+      c.p_a = camera_.Triangulate(la.x, la.y, da);
+      c.p_b = camera_.Triangulate(lb.x, lb.y, db);
+      corr.push_back(c);
+      corr_quad.push_back(static_cast<int>(k));
+    }
+    if (static_cast<int>(corr.size()) < options_.min_quads) continue;
+    RansacResult r = RansacMotion(camera_, corr, options_.ransac);
+    // Keep the attempt with the most inliers; stop early when this one is clearly good.
+    if (r.ok && (!ransac.ok || r.inliers.size() > ransac.inliers.size())) {
+      ransac = std::move(r);
+      best_quads = quads;
+      best_corr = corr;
+      best_corr_quad = corr_quad;
+      best_stats = qstats;
+    }
+    if (ransac.ok && static_cast<int>(ransac.inliers.size()) >= 2 * options_.min_quads) break;
+  }
+  if (ransac.ok) {
+    quads.swap(best_quads);
+    corr.swap(best_corr);
+    corr_quad.swap(best_corr_quad);
+    qstats = best_stats;
   }
   result.stats.quads = qstats;
   result.stats.ms_matching += NowMs() - t0;
-  if (static_cast<int>(quads.size()) < options_.min_quads) {
+  if (static_cast<int>(corr.size()) < options_.min_quads) {
     return reject(TrackingState::kNotTracked,
-                  "only " + std::to_string(quads.size()) + " closed quadrilaterals (need " +
+                  "only " + std::to_string(corr.size()) + " closed quadrilaterals (need " +
                       std::to_string(options_.min_quads) + ") against the frame " +
                       std::to_string(dt_s) + " s earlier");
   }
 
-  // ---- positions: left corners as detected, right x sub-pixel (see RefineStereo) ----
-  std::vector<cv::Point2f> la(quads.size()), ra(quads.size()), lb(quads.size()), rb(quads.size());
-  for (size_t k = 0; k < quads.size(); ++k) {
-    la[k] = prev.fl.keypoints[static_cast<size_t>(quads[k].left_a)].pt;
-    lb[k] = cur->fl.keypoints[static_cast<size_t>(quads[k].left_b)].pt;
-    ra[k] = cv::Point2f(prev.right_x[static_cast<size_t>(quads[k].left_a)], la[k].y);
-    rb[k] = cv::Point2f(cur->right_x[static_cast<size_t>(quads[k].left_b)], lb[k].y);
-  }
-  std::vector<char> keep(quads.size(), 1);
-
-  // ---- motion: RANSAC + SVD, then refinement ----
+  // ---- motion: RANSAC + SVD (above), then refinement ----
   t0 = NowMs();
-  std::vector<StereoCorrespondence> corr;
-  std::vector<int> corr_quad;  // correspondence -> quad index
-  corr.reserve(quads.size());
-  for (size_t k = 0; k < quads.size(); ++k) {
-    if (!keep[k]) continue;
-    const double da = la[k].x - ra[k].x, db = lb[k].x - rb[k].x;
-    if (!(da > 0 && db > 0)) continue;
-    StereoCorrespondence c;
-    // Rectified pair: the left row is the point's row (the right one was aligned to it).
-    c.obs_a = Eigen::Vector3d(la[k].x, la[k].y, ra[k].x);
-    c.obs_b = Eigen::Vector3d(lb[k].x, lb[k].y, rb[k].x);
-    c.p_a = camera_.Triangulate(la[k].x, la[k].y, da);
-    c.p_b = camera_.Triangulate(lb[k].x, lb[k].y, db);
-    corr.push_back(c);
-    corr_quad.push_back(static_cast<int>(k));
-  }
-  const RansacResult ransac = RansacMotion(camera_, corr, options_.ransac);
   result.stats.ransac_iterations = ransac.iterations;
   result.stats.ransac_inliers = static_cast<int>(ransac.inliers.size());
   if (!ransac.ok) {
