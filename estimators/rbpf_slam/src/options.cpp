@@ -51,6 +51,9 @@ Status GridOptions::Validate() const {
                          "-grid.log_odds_clamp (e.g. 0.0)");
   }
   if (free_space_beam_step < 1) return Status::Error("grid.free_space_beam_step must be >= 1");
+  if (free_space_margin < 0 || free_space_margin > 10) {
+    return Status::Error("grid.free_space_margin must be in [0, 10] cells");
+  }
   return Status::Ok();
 }
 

@@ -42,6 +42,7 @@ TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
       if (d <= dist_max_) disk_.push_back({dx, dy, d});
     }
   }
+  std::stable_sort(disk_.begin(), disk_.end(), [](const Offset& a, const Offset& b) { return a.d < b.d; });
   empty_ = std::make_shared<Tile>();
   empty_->log_odds.fill(0);
   empty_->dist.fill(static_cast<uint8_t>(dist_max_));
@@ -89,10 +90,6 @@ Tile* TiledGrid::MutableTile(int tx, int ty) {
   return slot.get();
 }
 
-int TiledGrid::RawDist(int cx, int cy) const {
-  const Tile* t = TileAt(cx >> kTileBits, cy >> kTileBits);
-  return t ? t->dist[LocalIndex(cx, cy)] : dist_max_;
-}
 
 void TiledGrid::SetRawDist(int cx, int cy, int value) {
   Tile* t = MutableTile(cx >> kTileBits, cy >> kTileBits);
@@ -145,33 +142,21 @@ void TiledGrid::OnBecameOccupied(int cx, int cy) {
 }
 
 void TiledGrid::OnBecameFree(int cx, int cy) {
-  // Recompute the field inside the radius from the obstacles within twice the radius.
-  SetRawDist(cx, cy, 1);  // no longer an obstacle; recomputed below
-  obstacles_.clear();
-  const int r2 = 2 * radius_;
-  for (int y = cy - r2; y <= cy + r2; ++y) {
-    for (int x = cx - r2; x <= cx + r2;) {
-      const Tile* t = TileAt(x >> kTileBits, y >> kTileBits);
-      const int tile_end = ((x >> kTileBits) + 1) << kTileBits;  // first x of the next tile
-      const int stop = std::min(cx + r2 + 1, tile_end);
-      if (t && t->occupied > 0) {
-        for (; x < stop; ++x) {
-          if (t->dist[LocalIndex(x, y)] == 0) obstacles_.emplace_back(x, y);
-        }
-      }
-      x = stop;
-    }
-  }
-  const int side = 2 * radius_ + 1;
+  // Only cells whose nearest obstacle was this one (stored distance == distance to it) change;
+  // each of them searches the disk outwards (offsets sorted by distance) for its new nearest.
+  SetRawDist(cx, cy, 1);  // no longer an obstacle (1 ≠ 0); recomputed below
   for (const Offset& o : disk_) {
     const int x = cx + o.dx, y = cy + o.dy;
     const int cur = RawDist(x, y);
-    if (cur == dist_max_ || cur == 0) continue;  // saturated (cannot drop) or an obstacle
+    if (cur == 0) continue;                 // another obstacle
+    if (o.d != 0 && cur != o.d) continue;   // its nearest obstacle is another one
     int best = dist_max_;
-    for (const auto& ob : obstacles_) {
-      const int ddx = ob.first - x, ddy = ob.second - y;
-      if (ddx < -radius_ || ddx > radius_ || ddy < -radius_ || ddy > radius_) continue;
-      best = std::min<int>(best, dist_table_[static_cast<size_t>(ddy + radius_) * side + (ddx + radius_)]);
+    for (const Offset& q : disk_) {
+      if (q.d >= best) break;
+      if (RawDist(x + q.dx, y + q.dy) == 0) {
+        best = q.d;
+        break;
+      }
     }
     if (best != cur) SetRawDist(x, y, best);
   }
@@ -195,9 +180,12 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     int err = dx + dy;
     int ctx = INT32_MIN, cty = INT32_MIN;
     Tile* tile = nullptr;
+    // Hits stop clearing `free_space_margin` cells before the end cell, so rays grazing a wall
+    // do not erode it (and the likelihood field does not flicker).
+    const int margin = is_hit[k] ? opt_.free_space_margin : 0;
     while (true) {
       const bool at_end = (x == ex && y == ey);
-      if (at_end && is_hit[k]) break;
+      if (is_hit[k] && std::max(std::abs(ex - x), std::abs(ey - y)) <= margin) break;
       const int tx = x >> kTileBits, ty = y >> kTileBits;
       if (tx != ctx || ty != cty) {
         tile = MutableTile(tx, ty);

@@ -22,6 +22,8 @@ struct GridOptions {
   double log_odds_free = 0.45;     // [-] ... and stops being one when it falls below this
                                    //     (hysteresis: keeps the likelihood field from flickering)
   int free_space_beam_step = 1;    // [-] clear free space along every n-th beam (1 = all beams)
+  int free_space_margin = 1;       // [cells] a hit stops clearing this many cells before its end
+                                   //     cell (0 = up to the end cell; keeps walls from eroding)
 
   template <class A>
   void Serialize(A* a) {
@@ -34,6 +36,7 @@ struct GridOptions {
     a->Visit("log_odds_occupied", &log_odds_occupied);
     a->Visit("log_odds_free", &log_odds_free);
     a->Visit("free_space_beam_step", &free_space_beam_step);
+    a->Visit("free_space_margin", &free_space_margin);
   }
   Status Validate() const;
 };

@@ -90,7 +90,10 @@ class TiledGrid {
   }
   Tile* MutableTile(int tx, int ty);
   void Grow(int tx, int ty);
-  int RawDist(int cx, int cy) const;
+  int RawDist(int cx, int cy) const {
+    const Tile* t = TileAt(cx >> kTileBits, cy >> kTileBits);
+    return t ? t->dist[((cy & (kTileSize - 1)) << kTileBits) | (cx & (kTileSize - 1))] : dist_max_;
+  }
   void SetRawDist(int cx, int cy, int value);
   void OnBecameOccupied(int cx, int cy);
   void OnBecameFree(int cx, int cy);
@@ -106,12 +109,11 @@ class TiledGrid {
   struct Offset {
     int dx, dy, d;
   };
-  std::vector<Offset> disk_;
+  std::vector<Offset> disk_;  // sorted by distance
 
   int tx0_ = 0, ty0_ = 0, ntx_ = 0, nty_ = 0;
   std::vector<std::shared_ptr<Tile>> tiles_;
   std::shared_ptr<Tile> empty_;  // prototype of a fresh tile
-  std::vector<std::pair<int, int>> obstacles_;  // scratch buffer of OnBecameFree
 };
 
 }  // namespace fl::rbpf
