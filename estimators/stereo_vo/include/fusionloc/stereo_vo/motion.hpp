@@ -92,7 +92,7 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
                           const RansacOptions& options);
 
 struct RefineOptions {
-  int max_iterations = 10;          // Levenberg-Marquardt iterations
+  int max_iterations = 5;           // Levenberg-Marquardt iterations (converges in 2-4)
   double huber_px = 1.0;            // [px] Huber loss width (down-weights remaining outliers)
   double min_sigma_px = 0.2;        // [px] lower bound on the measured reprojection noise
   // Multiplies the covariance: the refinement treats the triangulated points as exact, so its
