@@ -213,10 +213,11 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
                   "laser pose at " + TimeText(utime) + " has NaN/Inf; dropped");
   }
   if (!nodes_.empty() && utime <= nodes_.back().utime) {
-    return Reject(&counters_.rejected_node_time,
-                  "laser pose at " + TimeText(utime) + " is not newer than the newest node (" +
-                      TimeText(nodes_.back().utime) + "); dropped (laser poses must arrive in "
-                      "time order)");
+    return Reject(&counters_.rejected_node_time, "laser pose at " + TimeText(utime) +
+                                                     " is not newer than the newest node (" +
+                                                     TimeText(nodes_.back().utime) +
+                                                     "); dropped (laser poses must arrive in "
+                                                     "time order)");
   }
   Node node;
   node.utime = utime;
@@ -346,14 +347,14 @@ Status FactorGraphFusion::AttachFactor(const RelativePoseFactor& f, const Pose2&
   int ni = -1, nj = -1;
   Pose2 T_ni_ti, T_nj_tj;
   if (!Attach(f.utime_i, &ni, &T_ni_ti)) {
-    return Reject(&counters_.rejected_no_node,
-                  what + ": no laser node within " + std::to_string(options_.attach_tolerance_s) +
-                      " s of " + TimeText(f.utime_i) + "; dropped");
+    return Reject(&counters_.rejected_no_node, what + ": no laser node within " +
+                                                   std::to_string(options_.attach_tolerance_s) +
+                                                   " s of " + TimeText(f.utime_i) + "; dropped");
   }
   if (!Attach(f.utime_j, &nj, &T_nj_tj)) {
-    return Reject(&counters_.rejected_no_node,
-                  what + ": no laser node within " + std::to_string(options_.attach_tolerance_s) +
-                      " s of " + TimeText(f.utime_j) + "; dropped");
+    return Reject(&counters_.rejected_no_node, what + ": no laser node within " +
+                                                   std::to_string(options_.attach_tolerance_s) +
+                                                   " s of " + TimeText(f.utime_j) + "; dropped");
   }
   if (ni == nj) {
     return Reject(&counters_.rejected_same_node,
@@ -459,7 +460,8 @@ void FactorGraphFusion::AddOdometryFactors() {
     factor.i = j - 1;
     factor.j = j;
     factor.T_i_j = motion;
-    factor.information = Eigen::Vector3d(1 / (sxy * sxy), 1 / (sxy * sxy), 1 / (sth * sth)).asDiagonal();
+    factor.information =
+        Eigen::Vector3d(1 / (sxy * sxy), 1 / (sxy * sxy), 1 / (sth * sth)).asDiagonal();
     factor.source = FactorSource::kWheelOdometry;
     factor.cost.reset(Se2BetweenCost::Create(
         ToVector(motion), Eigen::Vector3d(1 / sxy, 1 / sxy, 1 / sth).asDiagonal()));
@@ -635,11 +637,11 @@ void FactorGraphFusion::FillUnconstrained(int first) {
       }
       const Node& b = nodes_[m];
       const Pose2 bwd = ToPose2(b.state) * b.T_map_base_rbpf.between(nodes_[q].T_map_base_rbpf);
-      const double alpha = static_cast<double>(nodes_[q].utime - a.utime) /
-                           static_cast<double>(b.utime - a.utime);
-      nodes_[q].state = Eigen::Vector3d(
-          (1 - alpha) * fwd.x + alpha * bwd.x, (1 - alpha) * fwd.y + alpha * bwd.y,
-          WrapAngle(fwd.theta + alpha * WrapAngle(bwd.theta - fwd.theta)));
+      const double alpha =
+          static_cast<double>(nodes_[q].utime - a.utime) / static_cast<double>(b.utime - a.utime);
+      nodes_[q].state =
+          Eigen::Vector3d((1 - alpha) * fwd.x + alpha * bwd.x, (1 - alpha) * fwd.y + alpha * bwd.y,
+                          WrapAngle(fwd.theta + alpha * WrapAngle(bwd.theta - fwd.theta)));
     }
     k = m;
   }

@@ -142,8 +142,8 @@ class FusionProcess {
       PublishTrajectory(last_utime_);
     }
     SaveMap();
-    status_.SetState(fusionloc::status_t::LEVEL_OK, "finished: " +
-                                                        fusion_.last_summary().ToString());
+    status_.SetState(fusionloc::status_t::LEVEL_OK,
+                     "finished: " + fusion_.last_summary().ToString());
     status_.Tick(true);
     const auto& c = fusion_.counters();
     FL_LOG(INFO) << fusion_.num_nodes() << " nodes, " << fusion_.num_factors() << " factors, "
@@ -179,9 +179,8 @@ class FusionProcess {
     status_.Set("full_solves", static_cast<double>(fusion_.counters().full_solves));
     status_.Set("map_keyframes", map_.num_keyframes());
     if (u.ran) {
-      status_.SetState(fusionloc::status_t::LEVEL_OK, u.ToString() + (last_full_.ran
-                                                                           ? "; last " + last_full_.ToString()
-                                                                           : ""));
+      status_.SetState(fusionloc::status_t::LEVEL_OK,
+                       u.ToString() + (last_full_.ran ? "; last " + last_full_.ToString() : ""));
     }
   }
 
@@ -216,8 +215,9 @@ class FusionProcess {
     Eigen::Isometry3f T_base_frame = Eigen::Isometry3f::Identity();
     if (m.frame == "camera") {
       if (!have_calibration_) {
-        status_.CountDropped("VO_POINTS in the camera frame before any STEREO_CALIBRATION "
-                             "(T_base_camera unknown); keyframe dropped");
+        status_.CountDropped(
+            "VO_POINTS in the camera frame before any STEREO_CALIBRATION "
+            "(T_base_camera unknown); keyframe dropped");
         return;
       }
       T_base_frame = T_base_camera_.cast<float>();
@@ -276,8 +276,8 @@ class FusionProcess {
 
   void SaveMap() {
     int skipped = 0;
-    const std::vector<Eigen::Vector3f> points = map_.Build(
-        [this](Utime t, Pose2* p) { return fusion_.PoseAt(t, p); }, &skipped);
+    const std::vector<Eigen::Vector3f> points =
+        map_.Build([this](Utime t, Pose2* p) { return fusion_.PoseAt(t, p); }, &skipped);
     if (skipped > 0) {
       FL_LOG(WARN) << skipped << " map keyframes lie outside the fused trajectory's time span "
                    << "and were left out";
@@ -299,8 +299,7 @@ class FusionProcess {
       const std::filesystem::path parent = std::filesystem::path(map_out_).parent_path();
       if (!parent.empty()) std::filesystem::create_directories(parent);
       fl::maps::SavePointCloudPcd(points, {}, map_out_ + ".pcd");
-      fl::maps::SavePointCloudTopView(points, map_out_ + "_top.png",
-                                      config_.map_png_resolution_m);
+      fl::maps::SavePointCloudTopView(points, map_out_ + "_top.png", config_.map_png_resolution_m);
       FL_LOG(INFO) << "saved " << points.size() << " map points to " << map_out_ << ".pcd and "
                    << map_out_ << "_top.png";
     } catch (const std::exception& e) {

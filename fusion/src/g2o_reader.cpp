@@ -119,8 +119,8 @@ Status ReadG2o(std::istream& in, const std::string& name, G2oGraph* graph) {
     } else if (tag == "EDGE_SE2") {
       int i = 0, j = 0;
       double v[9];
-      if (!ReadId(&ls, &i, &error) || !ReadId(&ls, &j, &error) ||
-          !ReadNumbers(&ls, 9, v, &error) || !NoTrailing(&ls, &error)) {
+      if (!ReadId(&ls, &i, &error) || !ReadId(&ls, &j, &error) || !ReadNumbers(&ls, 9, v, &error) ||
+          !NoTrailing(&ls, &error)) {
         return fail(error);
       }
       G2oEdge2 e;
@@ -146,8 +146,7 @@ Status ReadG2o(std::istream& in, const std::string& name, G2oGraph* graph) {
       graph->edges3.push_back(e);
       edge_lines.emplace_back(line_no, static_cast<int>(graph->edges3.size() - 1));
     } else {
-      return fail(
-          "unknown tag; supported: VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT");
+      return fail("unknown tag; supported: VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT");
     }
   }
   if (in.bad()) return Status::Error(name + ": read error");
@@ -169,8 +168,9 @@ Status ReadG2o(std::istream& in, const std::string& name, G2oGraph* graph) {
     for (int id : {i, j}) {
       const bool known = is3 ? graph->poses3.count(id) > 0 : graph->poses2.count(id) > 0;
       if (!known) {
-        return Status::Error(name + ":" + std::to_string(line_of_edge) + ": edge refers to vertex " +
-                             std::to_string(id) + " which no VERTEX line defines");
+        return Status::Error(name + ":" + std::to_string(line_of_edge) +
+                             ": edge refers to vertex " + std::to_string(id) +
+                             " which no VERTEX line defines");
       }
     }
   }

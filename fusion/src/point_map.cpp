@@ -29,8 +29,7 @@ pcl::PointCloud<pcl::PointXYZ>::Ptr VoxelFilter(const pcl::PointCloud<pcl::Point
     cloud->points.push_back(p);
   }
   pcl::VoxelGrid<pcl::PointXYZ> grid;
-  grid.setLeafSize(static_cast<float>(voxel), static_cast<float>(voxel),
-                   static_cast<float>(voxel));
+  grid.setLeafSize(static_cast<float>(voxel), static_cast<float>(voxel), static_cast<float>(voxel));
   for (auto& [key, cloud] : tiles) {
     cloud->width = static_cast<uint32_t>(cloud->points.size());
     cloud->height = 1;

@@ -81,8 +81,8 @@ TEST(FusionCostFunctions, Se2BetweenZeroAtTruthAndWrapsAngle) {
   ASSERT_TRUE(cost->Evaluate(params, r, nullptr));
   for (double v : r) EXPECT_NEAR(v, 0.0, 1e-12);
   // A wrong measurement gives the expected whitened residual.
-  std::unique_ptr<ceres::CostFunction> off(Se2BetweenCost::Create(
-      Eigen::Vector3d(1.0, 0.0, 0.02), 2.0 * Eigen::Matrix3d::Identity()));
+  std::unique_ptr<ceres::CostFunction> off(
+      Se2BetweenCost::Create(Eigen::Vector3d(1.0, 0.0, 0.02), 2.0 * Eigen::Matrix3d::Identity()));
   const double pj2[3] = {pj[0], pj[1], pj[2] + 0.1};
   const double* params2[2] = {pi, pj2};
   ASSERT_TRUE(off->Evaluate(params2, r, nullptr));
@@ -116,8 +116,8 @@ TEST(FusionCostFunctions, Se3BetweenGradientChecker) {
     Eigen::Matrix<double, 6, 6> a;
     for (int i = 0; i < 36; ++i) a.data()[i] = n(rng);
     Eigen::Matrix<double, 6, 6> s;
-    ASSERT_TRUE(SqrtInformation<6>(a * a.transpose() + Eigen::Matrix<double, 6, 6>::Identity(),
-                                   &s));
+    ASSERT_TRUE(
+        SqrtInformation<6>(a * a.transpose() + Eigen::Matrix<double, 6, 6>::Identity(), &s));
     const Eigen::Quaterniond q_ij = Eigen::Quaterniond(n(rng), n(rng), n(rng), n(rng)).normalized();
     std::unique_ptr<ceres::CostFunction> cost(
         Se3BetweenCost::Create(Eigen::Vector3d(n(rng), n(rng), n(rng)), q_ij, s));

@@ -69,7 +69,7 @@ TEST(FusionFactorGraph, SquareWithLoopClosureConvergesToTruth) {
   const FusionSimData d = MakeRoundedSquareSim(so);
   FactorGraphFusion fusion(TestOptions());
   RunInOrder(d, &fusion);
-  EXPECT_GT(MaxError(d.rbpf, d.truth), 1.0);  // the initial values are far off
+  EXPECT_GT(MaxError(d.rbpf, d.truth), 1.0);   // the initial values are far off
   EXPECT_TRUE(fusion.full_solve_requested());  // the loop closure asks for it
   const SolveSummary s = fusion.FullSolve();
   EXPECT_TRUE(s.ran && s.full);
@@ -134,8 +134,8 @@ TEST(FusionFactorGraph, AsynchronousVisionFactorIsPlacedByInterpolation) {
   // first straight and then in the first corner, moving 1 m/s (3 cm per 30 ms).
   const Utime t0 = so.start_utime;
   const Utime ti = t0 + SecondsToUtime(3.03), tj = t0 + SecondsToUtime(5.53);
-  const Pose2 truth_i = fl::test::RoundedSquarePose(so, 3.03), truth_j =
-                                                                   fl::test::RoundedSquarePose(so, 5.53);
+  const Pose2 truth_i = fl::test::RoundedSquarePose(so, 3.03),
+              truth_j = fl::test::RoundedSquarePose(so, 5.53);
   RelativePoseFactor f;
   f.utime_i = ti;
   f.utime_j = tj;

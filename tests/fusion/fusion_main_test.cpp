@@ -139,7 +139,8 @@ TEST(FusionMain, BadArgumentsAndConfigAreClearErrors) {
   EXPECT_NE(RunFusion("--no-such-flag"), 0);
   EXPECT_NE(RunFusion("--config /nonexistent/fusion.yaml"), 0);
   EXPECT_NE(RunFusion("--lcm-url log:/nonexistent/in.lcmlog"), 0);
-  EXPECT_EQ(RunFusion("--config " + fl::test::SourceDir() + "/config/fusion.yaml --print-config"), 0);
+  EXPECT_EQ(RunFusion("--config " + fl::test::SourceDir() + "/config/fusion.yaml --print-config"),
+            0);
 }
 
 }  // namespace

@@ -71,9 +71,9 @@ TEST(FusionG2oReader, MalformedLinesNameFileAndLine) {
   ExpectError("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 0 1 0 0\n", "duplicate vertex id 0");
   ExpectError("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0 7\n", "extra field");
   ExpectError("VERTEX_SE2 0 0 0 0\nVERTEX_XY 1 0 0\n", "unknown tag");
-  ExpectError("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 5 1 0 0 1 0 0 1 0 1\n", "t.g2o:2: edge refers to vertex 5");
-  ExpectError("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0\n",
-              "t.g2o:3:");
+  ExpectError("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 5 1 0 0 1 0 0 1 0 1\n",
+              "t.g2o:2: edge refers to vertex 5");
+  ExpectError("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0\n", "t.g2o:3:");
   ExpectError("VERTEX_SE2 -1 0 0 0\n", "not a non-negative integer");
   ExpectError("VERTEX_SE3:QUAT 0 0 0 0 0 0 0 0\n", "quaternion is zero");
   ExpectError("VERTEX_SE2 0 0 0 0\nVERTEX_SE3:QUAT 1 0 0 0 0 0 0 1\n", "mixes 2D and 3D");

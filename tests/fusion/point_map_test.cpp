@@ -34,10 +34,12 @@ TEST(FusionPointMap, PlacesKeyframesByPoseAndVoxelFilters) {
   }
   EXPECT_TRUE(found_turned);
   // A keyframe without a pose is skipped and counted.
-  const auto none = map.Build([](Utime t, Pose2* p) {
-    *p = Pose2();
-    return t == 100;
-  }, &skipped);
+  const auto none = map.Build(
+      [](Utime t, Pose2* p) {
+        *p = Pose2();
+        return t == 100;
+      },
+      &skipped);
   EXPECT_EQ(skipped, 1);
   EXPECT_EQ(none.size(), 1u);
 }

@@ -73,8 +73,7 @@ TEST(FusionPoseGraph, Noisy2dLoopConvergesAndFixesFirstPose) {
 }
 
 TEST(FusionPoseGraph, BadInformationIsRejectedNamingTheEdge) {
-  std::istringstream in(
-      "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 0 0 1\n");
+  std::istringstream in("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 0 0 1\n");
   G2oGraph g;
   ASSERT_TRUE(ReadG2o(in, "bad", &g).ok());
   PoseGraphResult result;

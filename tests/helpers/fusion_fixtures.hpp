@@ -17,20 +17,20 @@
 namespace fl::test {
 
 struct FusionSimOptions {
-  double side_m = 6.0;             // [m] square side
-  double corner_radius_m = 0.8;    // [m] rounded corners
-  double speed_mps = 1.0;          // [m/s]
-  int laps = 1;                    // laps of the square
-  double laser_hz = 10.0;          // node rate
-  int vision_every = 5;            // a vision keyframe every N laser periods (2 Hz)
-  double vision_offset_s = 0.013;  // [s] vision times = laser times + offset
-  double laser_sigma_xy = 0.0;     // [m] noise of laser between-factors
-  double laser_sigma_theta = 0.0;  // [rad]
-  double vision_sigma_xy = 0.0;    // [m] noise of vision factors
-  double vision_sigma_theta = 0.0; // [rad]
+  double side_m = 6.0;               // [m] square side
+  double corner_radius_m = 0.8;      // [m] rounded corners
+  double speed_mps = 1.0;            // [m/s]
+  int laps = 1;                      // laps of the square
+  double laser_hz = 10.0;            // node rate
+  int vision_every = 5;              // a vision keyframe every N laser periods (2 Hz)
+  double vision_offset_s = 0.013;    // [s] vision times = laser times + offset
+  double laser_sigma_xy = 0.0;       // [m] noise of laser between-factors
+  double laser_sigma_theta = 0.0;    // [rad]
+  double vision_sigma_xy = 0.0;      // [m] noise of vision factors
+  double vision_sigma_theta = 0.0;   // [rad]
   double rbpf_heading_bias = 0.004;  // [rad/step] drift of the RBPF poses
-  bool loop_closure = true;        // laser loop closure newest -> first node
-  Utime start_utime = 1000000;     // [us]
+  bool loop_closure = true;          // laser loop closure newest -> first node
+  Utime start_utime = 1000000;       // [us]
   unsigned seed = 1;
 };
 

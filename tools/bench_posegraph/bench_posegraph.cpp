@@ -122,9 +122,10 @@ int main(int argc, char** argv) {
       if (!ref->second.converges) note << " (reference not converged in 100 its)";
       if (ref->second.ceres_example_s > 0) {
         run.Add("ceres_example_s", ref->second.ceres_example_s);
-        note << "; time vs Ceres example " << ref->second.ceres_example_s << " s: "
-             << (run.Get("solve_s") <= ref->second.ceres_example_s ? "met" : "slower")
-             << " (wall), " << (run.Get("solve_cpu_s") <= ref->second.ceres_example_s ? "met" : "slower")
+        note << "; time vs Ceres example " << ref->second.ceres_example_s
+             << " s: " << (run.Get("solve_s") <= ref->second.ceres_example_s ? "met" : "slower")
+             << " (wall), "
+             << (run.Get("solve_cpu_s") <= ref->second.ceres_example_s ? "met" : "slower")
              << " (CPU)";
       }
     } else {

@@ -15,8 +15,8 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
-#include <sstream>
 #include <optional>
+#include <sstream>
 
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/command_line.hpp"
@@ -193,7 +193,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fl::rbpf::RbpfSlamOptions rbpf_options;  // defaults, as bench laser
-  const fl::vo::StereoVoOptions vo_options;       // defaults, as bench stereo
+  const fl::vo::StereoVoOptions vo_options;      // defaults, as bench stereo
 
   fl::bench::Report report("fusion");
   std::vector<std::string> names;
@@ -253,7 +253,8 @@ int main(int argc, char** argv) {
       run.Add("items", static_cast<double>(ate.utimes.size()));
       if (e == 2) {
         const auto st = fl::bench::ComputeStats(r.update_ms);
-        run.Add("ms_per_item_median", st.median).Add("ms_per_item_mean", st.mean)
+        run.Add("ms_per_item_median", st.median)
+            .Add("ms_per_item_mean", st.mean)
             .Add("ms_per_item_p95", st.p95);
         run.Add("full_solves", static_cast<double>(r.full_solve_ms.size()));
         run.Add("solve_s", fl::bench::ComputeStats(r.full_solve_ms).max / 1000.0);
@@ -261,11 +262,13 @@ int main(int argc, char** argv) {
       }
       if (e == 0) {
         run.Add("factors", static_cast<double>(r.laser_factors));
-        if (!r.laser_chi2.empty()) run.Add("factor_chi2_median", fl::bench::ComputeStats(r.laser_chi2).median);
+        if (!r.laser_chi2.empty())
+          run.Add("factor_chi2_median", fl::bench::ComputeStats(r.laser_chi2).median);
       }
       if (e == 1) {
         run.Add("factors", static_cast<double>(r.vo_factors));
-        if (!r.vo_chi2.empty()) run.Add("factor_chi2_median", fl::bench::ComputeStats(r.vo_chi2).median);
+        if (!r.vo_chi2.empty())
+          run.Add("factor_chi2_median", fl::bench::ComputeStats(r.vo_chi2).median);
       }
       run.Add("peak_rss_mb", fl::bench::PeakRssMb());
       report.AddRun(run);
@@ -282,8 +285,8 @@ int main(int argc, char** argv) {
     const bool below_both = rmse[2] < rmse[0] && rmse[2] < rmse[1];
     note << "fused RMSE below both single-sensor RMSEs: " << (below_both ? "met" : "NOT met");
     if (world == "corridor") {
-      note << "; <= 0.5x RBPF-only (" << 0.5 * rmse[0] << " m): "
-           << (rmse[2] <= 0.5 * rmse[0] ? "met" : "NOT met");
+      note << "; <= 0.5x RBPF-only (" << 0.5 * rmse[0]
+           << " m): " << (rmse[2] <= 0.5 * rmse[0] ? "met" : "NOT met");
     }
     const double med = fl::bench::ComputeStats(r.update_ms).median;
     note << "; median update " << med << " ms <= 2 ms: " << (med <= 2.0 ? "met" : "NOT met");

@@ -95,35 +95,35 @@ struct RelativePoseFactor {
 };
 
 struct FusionOptions {
-  double attach_tolerance_s = 0.06;   // [s] factor time to nearest laser node (10 Hz: 0.05)
-  int window_size = 20;               // [nodes] optimised by each Update()
-  int max_window_nodes = 200;         // [nodes] largest window a late factor may extend to;
-                                      // reaching further back requests a full solve
-  int window_max_iterations = 10;     // LM iterations of an incremental update
-  int full_max_iterations = 50;       // LM iterations of a full solve
-  int full_solve_every_n_nodes = 100; // [nodes] periodic full solve (0: never)
+  double attach_tolerance_s = 0.06;        // [s] factor time to nearest laser node (10 Hz: 0.05)
+  int window_size = 20;                    // [nodes] optimised by each Update()
+  int max_window_nodes = 200;              // [nodes] largest window a late factor may extend to;
+                                           // reaching further back requests a full solve
+  int window_max_iterations = 10;          // LM iterations of an incremental update
+  int full_max_iterations = 50;            // LM iterations of a full solve
+  int full_solve_every_n_nodes = 100;      // [nodes] periodic full solve (0: never)
   bool full_solve_on_loop_closure = true;  // a loop-closure factor requests a full solve
-  std::string robust_loss = "cauchy"; // laser/vision factors: "none", "huber" or "cauchy"
-  double robust_loss_scale = 3.0;     // [sigma] whitened error where the loss bends
-  double prior_sigma_xy = 0.001;      // [m] prior on the first node (gauge)
-  double prior_sigma_theta = 0.001;   // [rad]
+  std::string robust_loss = "cauchy";      // laser/vision factors: "none", "huber" or "cauchy"
+  double robust_loss_scale = 3.0;          // [sigma] whitened error where the loss bends
+  double prior_sigma_xy = 0.001;           // [m] prior on the first node (gauge)
+  double prior_sigma_theta = 0.001;        // [rad]
   // RBPF pose chain: a between-factor from every pair of consecutive laser poses (the RBPF's
   // scan-matched motion), so that every node is constrained even between RBPF keyframes.
   bool laser_chain_factors = true;
-  double chain_sigma_xy_min = 0.01;        // [m] per node pair
-  double chain_sigma_xy_per_m = 0.05;      // [m/m]
-  double chain_sigma_theta_min = 0.005;    // [rad]
-  double chain_sigma_theta_per_rad = 0.05; // [rad/rad]
-  bool use_wheel_odometry = false;    // add odometry between-factors (off: the RBPF already
-                                      // fuses the wheel odometry; on would count it twice)
-  double odom_sigma_xy_min = 0.02;    // [m] odometry noise floor per node pair
-  double odom_sigma_xy_per_m = 0.05;  // [m/m] odometry xy noise per metre travelled
-  double odom_sigma_theta_min = 0.005;     // [rad] heading noise floor per node pair
-  double odom_sigma_theta_per_rad = 0.05;  // [rad/rad] heading noise per radian turned
-  double odom_sigma_theta_per_m = 0.01;    // [rad/m] heading noise per metre travelled
-  double odom_max_gap_s = 0.5;        // [s] no odometry factor across a larger sample gap
-  int max_pending_factors = 1000;     // factors waiting for their laser node; oldest dropped
-  bool compute_covariance = true;     // marginal covariance of the newest node per Update()
+  double chain_sigma_xy_min = 0.01;         // [m] per node pair
+  double chain_sigma_xy_per_m = 0.05;       // [m/m]
+  double chain_sigma_theta_min = 0.005;     // [rad]
+  double chain_sigma_theta_per_rad = 0.05;  // [rad/rad]
+  bool use_wheel_odometry = false;          // add odometry between-factors (off: the RBPF already
+                                            // fuses the wheel odometry; on would count it twice)
+  double odom_sigma_xy_min = 0.02;          // [m] odometry noise floor per node pair
+  double odom_sigma_xy_per_m = 0.05;        // [m/m] odometry xy noise per metre travelled
+  double odom_sigma_theta_min = 0.005;      // [rad] heading noise floor per node pair
+  double odom_sigma_theta_per_rad = 0.05;   // [rad/rad] heading noise per radian turned
+  double odom_sigma_theta_per_m = 0.01;     // [rad/m] heading noise per metre travelled
+  double odom_max_gap_s = 0.5;              // [s] no odometry factor across a larger sample gap
+  int max_pending_factors = 1000;           // factors waiting for their laser node; oldest dropped
+  bool compute_covariance = true;           // marginal covariance of the newest node per Update()
 
   template <class A>
   void Serialize(A* a) {
@@ -158,15 +158,15 @@ struct FusionOptions {
 
 // What one optimisation did (Ceres-style summary for the status message).
 struct SolveSummary {
-  bool ran = false;            // false: nothing to optimise
-  bool full = false;           // full solve (true) or incremental window (false)
-  std::string termination;     // Ceres termination type, e.g. "CONVERGENCE"
+  bool ran = false;         // false: nothing to optimise
+  bool full = false;        // full solve (true) or incremental window (false)
+  std::string termination;  // Ceres termination type, e.g. "CONVERGENCE"
   int iterations = 0;
   double initial_cost = 0.0;
   double final_cost = 0.0;
-  double time_ms = 0.0;        // wall time of building + solving
-  int num_nodes = 0;           // nodes optimised
-  int num_factors = 0;         // factors in the problem
+  double time_ms = 0.0;  // wall time of building + solving
+  int num_nodes = 0;     // nodes optimised
+  int num_factors = 0;   // factors in the problem
   std::string ToString() const;
 };
 
@@ -262,9 +262,9 @@ class FactorGraphFusion {
  private:
   struct Node {
     Utime utime = 0;
-    Pose2 T_map_base_rbpf;                 // input pose (for initialisation/interpolation)
+    Pose2 T_map_base_rbpf;  // input pose (for initialisation/interpolation)
     Eigen::Vector3d state = Eigen::Vector3d::Zero();  // fused T_map_base (x, y, theta)
-    std::vector<int> factors;              // indices into factors_
+    std::vector<int> factors;                         // indices into factors_
   };
   struct Factor {
     int i = -1, j = -1;  // node indices; j = -1 for the prior
@@ -306,8 +306,8 @@ class FactorGraphFusion {
   std::vector<Factor> factors_;
   std::deque<PendingFactor> pending_;
   std::deque<OdomSample> odometry_;
-  int next_odom_pair_ = 1;             // next node j needing an odometry factor (j-1, j)
-  int oldest_touched_node_ = -1;       // oldest node touched by factors since last Update
+  int next_odom_pair_ = 1;        // next node j needing an odometry factor (j-1, j)
+  int oldest_touched_node_ = -1;  // oldest node touched by factors since last Update
   bool full_solve_requested_ = false;
   int nodes_at_last_full_solve_ = 0;
   Eigen::Matrix3d latest_covariance_ = Eigen::Matrix3d::Zero();

@@ -7,10 +7,10 @@
 namespace fl::fusion {
 
 struct FusionProcessConfig {
-  FusionOptions graph;       // the factor graph (see factor_graph_fusion.hpp)
-  PointMapOptions map;       // the 3D point map (see point_map.hpp)
-  double trajectory_period_s = 1.0;  // [s of data time] FUSED_TRAJECTORY at least this often
-                                     // while the window changes it; always after a full solve
+  FusionOptions graph;                 // the factor graph (see factor_graph_fusion.hpp)
+  PointMapOptions map;                 // the 3D point map (see point_map.hpp)
+  double trajectory_period_s = 1.0;    // [s of data time] FUSED_TRAJECTORY at least this often
+                                       // while the window changes it; always after a full solve
   double map_png_resolution_m = 0.05;  // [m/pixel] of the saved top-view PNG
 
   template <class A>

@@ -48,8 +48,7 @@ struct G2oEdge3 {
 struct G2oGraph {
   std::map<int, Eigen::Vector3d> poses2;  // id -> T_world_i (x, y, theta)
   std::vector<G2oEdge2> edges2;
-  std::map<int, G2oPose3, std::less<int>,
-           Eigen::aligned_allocator<std::pair<const int, G2oPose3>>>
+  std::map<int, G2oPose3, std::less<int>, Eigen::aligned_allocator<std::pair<const int, G2oPose3>>>
       poses3;  // id -> T_world_i
   std::vector<G2oEdge3, Eigen::aligned_allocator<G2oEdge3>> edges3;
 

@@ -20,9 +20,9 @@
 namespace fl::fusion {
 
 struct PointMapOptions {
-  double voxel_size_m = 0.05;   // [m] voxel edge of the filter (keyframes and the map)
-  double max_range_m = 30.0;    // [m] keyframe points farther from the base are dropped
-  int max_points = 5000000;     // map points before Build() refuses (memory guard)
+  double voxel_size_m = 0.05;  // [m] voxel edge of the filter (keyframes and the map)
+  double max_range_m = 30.0;   // [m] keyframe points farther from the base are dropped
+  int max_points = 5000000;    // map points before Build() refuses (memory guard)
 
   template <class A>
   void Serialize(A* a) {

@@ -26,15 +26,15 @@ struct PoseGraphSolveOptions {
 struct PoseGraphResult {
   double initial_cost = 0.0;  // 1/2 sum |r|^2 at the file's initial values
   double final_cost = 0.0;
-  int iterations = 0;         // LM iterations (successful + unsuccessful steps)
-  double solve_s = 0.0;       // wall time of ceres::Solve
-  double solve_cpu_s = 0.0;   // CPU time of this process during ceres::Solve (robust to a
-                              // loaded machine; equals wall time when single-threaded & idle)
-  double total_s = 0.0;       // building the problem + solving
-  bool converged = false;     // Ceres termination CONVERGENCE
-  std::string termination;    // e.g. "CONVERGENCE", "NO_CONVERGENCE"
-  std::string brief_report;   // ceres::Solver::Summary::BriefReport()
-  std::string full_report;    // ceres::Solver::Summary::FullReport()
+  int iterations = 0;        // LM iterations (successful + unsuccessful steps)
+  double solve_s = 0.0;      // wall time of ceres::Solve
+  double solve_cpu_s = 0.0;  // CPU time of this process during ceres::Solve (robust to a
+                             // loaded machine; equals wall time when single-threaded & idle)
+  double total_s = 0.0;      // building the problem + solving
+  bool converged = false;    // Ceres termination CONVERGENCE
+  std::string termination;   // e.g. "CONVERGENCE", "NO_CONVERGENCE"
+  std::string brief_report;  // ceres::Solver::Summary::BriefReport()
+  std::string full_report;   // ceres::Solver::Summary::FullReport()
 };
 
 // Optimises graph's poses in place. Errors (not-positive-definite information on an edge,
