@@ -1,0 +1,196 @@
+// Tests of the LCM adapters (image decoding, message conversion) and of the fl-stereo-vo
+// process replaying a log: calibration handling, outputs, status on bad input.
+#include "fusionloc/stereo_vo/stereo_vo_lcm.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+
+#include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/status_t.hpp"
+#include "stereo_fixtures.hpp"
+#include "test_paths.hpp"
+
+namespace fl::vo {
+namespace {
+
+bot_core::image_t MakeImage(const cv::Mat& gray, int stride_pad = 0) {
+  bot_core::image_t im{};
+  im.width = gray.cols;
+  im.height = gray.rows;
+  im.row_stride = gray.cols + stride_pad;
+  im.pixelformat = bot_core::image_t::PIXEL_FORMAT_GRAY;
+  im.data.assign(static_cast<size_t>(im.row_stride) * gray.rows, 0);
+  for (int r = 0; r < gray.rows; ++r) {
+    std::copy(gray.ptr<uint8_t>(r), gray.ptr<uint8_t>(r) + gray.cols,
+              im.data.begin() + static_cast<long>(r) * im.row_stride);
+  }
+  im.size = static_cast<int32_t>(im.data.size());
+  return im;
+}
+
+bot_core::images_t MakeStereo(int64_t utime, const cv::Mat& l, const cv::Mat& r) {
+  bot_core::images_t m{};
+  m.utime = utime;
+  m.n_images = 2;
+  m.image_types = {bot_core::images_t::LEFT, bot_core::images_t::RIGHT};
+  m.images = {MakeImage(l), MakeImage(r)};
+  m.images[0].utime = m.images[1].utime = utime;
+  return m;
+}
+
+fusionloc::stereo_calibration_t MakeCalibration(const StereoCalibration& c, bool rectified) {
+  fusionloc::stereo_calibration_t m{};
+  m.width = c.width;
+  m.height = c.height;
+  m.fx = c.fx;
+  m.fy = c.fy;
+  m.cx = c.cx;
+  m.cy = c.cy;
+  m.baseline = c.baseline;
+  m.rectified = rectified;
+  fl::IsometryToArrays(c.T_base_camera, m.T_base_camera.trans, m.T_base_camera.quat);
+  fl::IsometryToArrays(Eigen::Isometry3d::Identity(), m.T_base_laser.trans, m.T_base_laser.quat);
+  return m;
+}
+
+TEST(StereoVoLcm, ImageConversions) {
+  cv::Mat gray(4, 5, CV_8UC1);
+  for (int i = 0; i < 20; ++i) gray.data[i] = static_cast<uint8_t>(i * 10);
+  cv::Mat out;
+  ASSERT_TRUE(ImageToGray(MakeImage(gray, 3), &out).ok());
+  EXPECT_EQ(cv::norm(out, gray, cv::NORM_INF), 0.0) << "row stride honoured";
+  // RGB is converted to gray.
+  bot_core::image_t rgb{};
+  rgb.width = 2;
+  rgb.height = 1;
+  rgb.row_stride = 6;
+  rgb.pixelformat = bot_core::image_t::PIXEL_FORMAT_RGB;
+  rgb.data = {255, 0, 0, 0, 0, 255};
+  rgb.size = 6;
+  ASSERT_TRUE(ImageToGray(rgb, &out).ok());
+  EXPECT_GT(out.at<uint8_t>(0, 0), out.at<uint8_t>(0, 1)) << "red is brighter than blue";
+  // Errors name the problem.
+  bot_core::image_t bad = MakeImage(gray);
+  bad.pixelformat = bot_core::image_t::PIXEL_FORMAT_MJPEG;
+  EXPECT_NE(ImageToGray(bad, &out).message().find("unsupported pixel format"), std::string::npos);
+  bad = MakeImage(gray);
+  bad.data.resize(10);
+  bad.size = 10;
+  EXPECT_NE(ImageToGray(bad, &out).message().find("bytes"), std::string::npos);
+  bad = MakeImage(gray);
+  bad.row_stride = 2;
+  EXPECT_NE(ImageToGray(bad, &out).message().find("row_stride"), std::string::npos);
+  bot_core::images_t one = MakeStereo(1, gray, gray);
+  one.n_images = 1;
+  one.image_types.resize(1);
+  one.images.resize(1);
+  cv::Mat l, r;
+  EXPECT_NE(StereoImagesToGray(one, &l, &r).message().find("RIGHT"), std::string::npos);
+}
+
+TEST(StereoVoLcm, FactorAndCalibrationConversions) {
+  KeyframeFactor f;
+  f.utime_i = 10;
+  f.utime_j = 20;
+  f.keyframe_id_i = 3;
+  f.keyframe_id_j = 4;
+  f.T_i_j.translation() = Eigen::Vector3d(1, 2, 3);
+  f.information = Eigen::Matrix<double, 6, 6>::Identity() * 5;
+  f.information(0, 5) = f.information(5, 0) = 0.5;
+  const fusionloc::relative_pose_factor_t m = FactorToLcm(f);
+  const int vision = fusionloc::relative_pose_factor_t::SOURCE_VISION;
+  EXPECT_EQ(m.source, vision);
+  EXPECT_EQ(m.utime_i, 10);
+  EXPECT_EQ(m.keyframe_id_j, 4);
+  EXPECT_EQ(m.trans[2], 3.0);
+  EXPECT_EQ(m.quat[0], 1.0);
+  EXPECT_EQ(m.information[5], 0.5);   // row 0, col 5
+  EXPECT_EQ(m.information[30], 0.5);  // row 5, col 0
+  const StereoCalibration c = fl::test::stereo::TestCalibration();
+  const StereoCalibration back = CalibrationFromLcm(MakeCalibration(c, true));
+  EXPECT_TRUE(back.T_base_camera.isApprox(c.T_base_camera, 1e-12));
+  EXPECT_EQ(back.width, c.width);
+  EXPECT_TRUE(back.Validate().ok());
+  EXPECT_FALSE(CalibrationFromLcm(MakeCalibration(c, false)).Validate().ok());
+}
+
+// Replays a log through the real process: an unrectified calibration is refused (status), the
+// valid one is used, a wrong-size frame and a repeated time stamp are dropped, and the
+// outputs appear on VO_POSE / VO_FACTORS / VO_POINTS.
+TEST(StereoVoLcm, ProcessReplaysALog) {
+  const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
+  if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
+  fl::test::TempDir dir;
+  const StereoCalibration calib = fl::test::stereo::TestCalibration();
+  const cv::Mat tex = fl::test::stereo::Texture(900, 700, 5);
+  {
+    fl::LcmLogWriter log(dir.file("in.lcmlog"));
+    const Utime t0 = 2000000000;
+    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, false), t0 - 2);
+    cv::Mat l, r;
+    fl::test::stereo::PlanePair(tex, calib, 5.0, 0.0, 0.0, &l, &r);
+    log.Write(fl::channels::kStereo, MakeStereo(t0 - 1, l, r), t0 - 1);  // no valid calibration
+    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0);
+    for (int k = 0; k < 25; ++k) {
+      fl::test::stereo::PlanePair(tex, calib, 5.0, 0.05 * k, 0.0, &l, &r);
+      const Utime t = t0 + 100000 * k;
+      log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);
+      if (k == 3) log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);  // repeated
+    }
+    const cv::Mat small(240, 320, CV_8UC1, cv::Scalar(100));
+    log.Write(fl::channels::kStereo, MakeStereo(t0 + 3000000, small, small), t0 + 3000000);
+    log.Close();
+  }
+  const std::string cmd = bin + " --lcm-url log:" + dir.file("in.lcmlog") + "," +
+                          dir.file("out.lcmlog") + " --log-level error > " +
+                          dir.file("stdout.txt") + " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  fl::LcmLogReader reader(dir.file("out.lcmlog"));
+  fl::LcmLogEvent ev;
+  std::map<std::string, int> counts;
+  fusionloc::status_t last_status;
+  bool saw_rectified_error = false;
+  double last_y = 0;
+  while (reader.Next(&ev)) {
+    ++counts[ev.channel];
+    const int size = static_cast<int>(ev.data.size());
+    if (ev.channel == fl::channels::kVoFactors) {
+      fusionloc::relative_pose_factor_t f;
+      ASSERT_EQ(f.decode(ev.data.data(), 0, size), size);
+      const int vision = fusionloc::relative_pose_factor_t::SOURCE_VISION;
+      EXPECT_EQ(f.source, vision);
+      EXPECT_GT(f.information[7], 0.0);  // (y, y)
+    } else if (ev.channel == fl::channels::kVoPose) {
+      bot_core::pose_t p;
+      ASSERT_EQ(p.decode(ev.data.data(), 0, size), size);
+      last_y = p.pos[1];
+    } else if (ev.channel == fl::channels::kVoPoints) {
+      fusionloc::point_cloud_t pc;
+      ASSERT_EQ(pc.decode(ev.data.data(), 0, size), size);
+      EXPECT_EQ(pc.frame, "camera");
+      EXPECT_EQ(pc.num_intensities, pc.num_points);
+    } else if (ev.channel.rfind("STATUS_", 0) == 0) {
+      ASSERT_EQ(last_status.decode(ev.data.data(), 0, size), size);
+      if (last_status.message.find("not rectified") != std::string::npos) {
+        saw_rectified_error = true;
+      }
+    }
+  }
+  EXPECT_EQ(counts[fl::channels::kVoPose], 25);
+  EXPECT_GE(counts[fl::channels::kVoFactors], 1);  // 1.2 m in 1 m keyframes
+  EXPECT_EQ(counts[fl::channels::kVoPoints], counts[fl::channels::kVoFactors] + 1);
+  EXPECT_NEAR(last_y, -0.05 * 24, 0.05);
+  EXPECT_GE(counts["STATUS_FL_STEREO_VO"], 1);
+  // Dropped: the frame before the calibration, the repeated time stamp, the wrong size, and
+  // the unrectified calibration.
+  EXPECT_EQ(last_status.messages_dropped, 4);
+  EXPECT_TRUE(saw_rectified_error) << "status should report the unrectified calibration";
+}
+
+}  // namespace
+}  // namespace fl::vo
