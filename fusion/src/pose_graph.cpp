@@ -72,6 +72,12 @@ Status OptimizePoseGraph(G2oGraph* graph, const PoseGraphSolveOptions& options,
   solver_options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   solver_options.num_threads = options.num_threads;
   solver_options.minimizer_progress_to_stdout = options.progress_to_stdout;
+  if (options.sparse_library == "eigen_sparse") {
+    solver_options.sparse_linear_algebra_library_type = ceres::EIGEN_SPARSE;
+  } else if (options.sparse_library != "suite_sparse") {
+    return Status::Error("sparse_library '" + options.sparse_library +
+                         "' unknown; use suite_sparse or eigen_sparse");
+  }
   std::string error;
   if (!solver_options.IsValid(&error)) return Status::Error("Ceres options: " + error);
   ceres::Solver::Summary summary;

@@ -43,6 +43,9 @@ int main(int argc, char** argv) {
   int threads = 1;
   std::string only;
   bool full_report = false;
+  std::string sparse_library = "suite_sparse";
+  cli.AddFlag("sparse-library", &sparse_library,
+              "sparse Cholesky: suite_sparse (as Ceres' examples) or eigen_sparse");
   cli.AddFlag("full-report", &full_report, "print Ceres' full solver report of each graph");
   cli.AddFlag("repeats", &repeats, "solves per graph; the median solve time is reported");
   cli.AddFlag("threads", &threads, "Ceres threads (1 = fair single-core time)");
@@ -83,6 +86,7 @@ int main(int argc, char** argv) {
     }
     fl::fusion::PoseGraphSolveOptions options;
     options.num_threads = threads;
+    options.sparse_library = sparse_library;
     std::vector<double> solve_times, total_times, cpu_times;
     fl::fusion::PoseGraphResult result;
     for (int r = 0; r < repeats && s.ok(); ++r) {

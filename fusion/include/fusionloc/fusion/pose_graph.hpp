@@ -21,6 +21,8 @@ struct PoseGraphSolveOptions {
   int num_threads = 1;       // 1 for a fair single-core time
   SqrtConvention sqrt_convention = SqrtConvention::kCeresExample;
   bool progress_to_stdout = false;
+  // Sparse Cholesky back-end: "suite_sparse" (CHOLMOD, as Ceres' examples) or "eigen_sparse".
+  std::string sparse_library = "suite_sparse";
 };
 
 struct PoseGraphResult {
