@@ -1,4 +1,4 @@
-// fl-bench-fusion: the MSIF comparison on the simulated worlds `paper` and `corridor`:
+// fl-bench-sim: the MSIF comparison on the simulated worlds `paper` and `corridor`:
 // RBPF-SLAM alone, stereo VO alone and their fusion by fl::fusion::FactorGraphFusion, each
 // against the simulator's ground truth (ATE after SE(2) alignment, position and heading).
 //
@@ -166,12 +166,12 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
 
 int main(int argc, char** argv) {
   fl::CommandLine cli(
-      "fl-bench-fusion",
+      "fl-bench-sim",
       "RBPF-SLAM alone, stereo VO alone and the factor-graph fusion on the simulated worlds "
       "(paper, corridor): ATE position/heading RMSE against ground truth, time per incremental "
       "update, and a PNG of x/y/heading error over time per world (MSIF Fig. 6).");
   fl::bench::CommonArgs args;
-  fl::bench::AddCommonFlags(&cli, &args, "fusion");
+  fl::bench::AddCommonFlags(&cli, &args, "sim");
   std::string worlds = "paper,corridor";
   std::string config_dir = "config";
   std::string fusion_config;
@@ -189,13 +189,13 @@ int main(int argc, char** argv) {
   try {
     if (!fusion_config.empty()) fopts = fl::LoadYamlFile<ff::FusionOptions>(fusion_config, "graph");
   } catch (const fl::ConfigError& e) {
-    std::cerr << "fl-bench-fusion: " << e.what() << "\n";
+    std::cerr << "fl-bench-sim: " << e.what() << "\n";
     return 2;
   }
   const fl::rbpf::RbpfSlamOptions rbpf_options;  // defaults, as bench laser
   const fl::vo::StereoVoOptions vo_options;      // defaults, as bench stereo
 
-  fl::bench::Report report("fusion");
+  fl::bench::Report report("sim");
   std::vector<std::string> names;
   for (size_t a = 0, b; a <= worlds.size(); a = b + 1) {
     b = worlds.find(',', a);
@@ -209,7 +209,7 @@ int main(int argc, char** argv) {
     try {
       so = fl::LoadYamlFile<fl::sim::SimOptions>(path);
     } catch (const fl::ConfigError& e) {
-      std::cerr << "fl-bench-fusion: " << e.what() << "\n";
+      std::cerr << "fl-bench-sim: " << e.what() << "\n";
       ++failures;
       continue;
     }
@@ -218,7 +218,7 @@ int main(int argc, char** argv) {
     try {
       r = RunWorld(so, rbpf_options, vo_options, fopts);
     } catch (const std::exception& e) {
-      std::cerr << "fl-bench-fusion: " << world << ": " << e.what() << "\n";
+      std::cerr << "fl-bench-sim: " << world << ": " << e.what() << "\n";
       ++failures;
       continue;
     }
@@ -295,22 +295,22 @@ int main(int argc, char** argv) {
     // Replace the last run with the annotated copy.
     std::vector<fl::bench::Run> runs = report.runs();
     runs.back().note = note.str();
-    report = fl::bench::Report("fusion");
+    report = fl::bench::Report("sim");
     for (auto& run : runs) report.AddRun(run);
     try {
       std::filesystem::create_directories(png_dir);
-      const std::string png = png_dir + "/fusion_" + world + "_errors.png";
+      const std::string png = png_dir + "/sim_" + world + "_errors.png";
       fl::eval::PlotSeries(png, "world " + world + ": error vs ground truth (SE(2)-aligned)",
                            "time [s]", panels);
       std::cout << "plot: " << png << "\n";
     } catch (const std::exception& e) {
-      std::cerr << "fl-bench-fusion: plot: " << e.what() << "\n";
+      std::cerr << "fl-bench-sim: plot: " << e.what() << "\n";
     }
   }
   try {
     fl::bench::Publish(report, args);
   } catch (const std::exception& e) {
-    std::cerr << "fl-bench-fusion: " << e.what() << "\n";
+    std::cerr << "fl-bench-sim: " << e.what() << "\n";
     return 1;
   }
   return failures == 0 ? 0 : 1;
