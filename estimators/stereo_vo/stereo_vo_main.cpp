@@ -3,11 +3,10 @@
 //   out: VO_POSE (bot_core.pose_t, T_world_base), VO_FACTORS (relative_pose_factor_t between
 //        keyframes, base frame, SOURCE_VISION), VO_POINTS (point_cloud_t per keyframe, frame
 //        "camera"), STATUS_FL_STEREO_VO (status_t).
-#include <opencv2/core/utility.hpp>
-
 #include <cmath>
 #include <iostream>
 #include <memory>
+#include <opencv2/core/utility.hpp>
 
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/command_line.hpp"
@@ -179,14 +178,13 @@ int main(int argc, char** argv) {
         status.Set("segment", r.segment);
       });
 
-  FL_LOG(INFO) << "listening on " << in_stereo << " and " << in_calib << " (" << lcm->url()
-               << ")";
+  FL_LOG(INFO) << "listening on " << in_stereo << " and " << in_calib << " (" << lcm->url() << ")";
   while (!fl::ShutdownRequested()) {
     if (lcm->HandleSubscriptions(100) < 0) break;
     status.Tick();
   }
   status.Tick(true);
-  FL_LOG(INFO) << "frames " << frames << ", tracked " << tracked << ", not tracked "
-               << not_tracked << ", keyframes " << keyframes << ", dropped " << status.dropped();
+  FL_LOG(INFO) << "frames " << frames << ", tracked " << tracked << ", not tracked " << not_tracked
+               << ", keyframes " << keyframes << ", dropped " << status.dropped();
   return 0;
 }

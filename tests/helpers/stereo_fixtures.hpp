@@ -3,10 +3,9 @@
 // correspondences from random points seen by a virtual rig under a known motion.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
-
-#include <Eigen/Geometry>
 #include <random>
 #include <vector>
 

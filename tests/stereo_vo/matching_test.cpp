@@ -32,12 +32,12 @@ TEST(StereoVoMatching, StereoMatchingHonoursEpipolarAndDisparityLimits) {
   opts.max_disparity_px = 100;
   opts.epipolar_tolerance_px = 3;
   // Left features 0..4 (seeds 1..5).
-  const Features left = MakeFeatures(
-      {{300, 100}, {300, 200}, {300, 300}, {300, 400}, {50, 50}}, {1, 2, 3, 4, 5});
+  const Features left =
+      MakeFeatures({{300, 100}, {300, 200}, {300, 300}, {300, 400}, {50, 50}}, {1, 2, 3, 4, 5});
   // Right: 0 is a true match (d = 20, dy = 2); 1 is 5 px off the row; 2 has negative
   // disparity; 3 has disparity 150 > d_max; 4 matches feature 4 with disparity 0 (not > 0).
-  const Features right = MakeFeatures(
-      {{280, 102}, {290, 205}, {310, 300}, {150, 400}, {50, 50}}, {1, 2, 3, 4, 5});
+  const Features right =
+      MakeFeatures({{280, 102}, {290, 205}, {310, 300}, {150, 400}, {50, 50}}, {1, 2, 3, 4, 5});
   const std::vector<int> m = MatchStereo(left, right, opts);
   ASSERT_EQ(m.size(), 5u);
   EXPECT_EQ(m[0], 0);
@@ -74,15 +74,30 @@ TEST(StereoVoMatching, QuadrilateralCheckRejectsInconsistentMatches) {
   opts.slope_threshold = 0.35;
   std::vector<cv::Point2f> la, ra, lb, rb;
   // 0: consistent (d 20 -> 21, flows (10,2) and (9,2)).
-  la.push_back({100, 100}); ra.push_back({80, 100}); lb.push_back({110, 102}); rb.push_back({89, 102});
+  la.push_back({100, 100});
+  ra.push_back({80, 100});
+  lb.push_back({110, 102});
+  rb.push_back({89, 102});
   // 1: consistent geometry, but the right temporal match lands on another feature.
-  la.push_back({300, 100}); ra.push_back({280, 100}); lb.push_back({305, 100}); rb.push_back({285, 100});
+  la.push_back({300, 100});
+  ra.push_back({280, 100});
+  lb.push_back({305, 100});
+  rb.push_back({285, 100});
   // 2: slope test fails: flows (4, 3) and (-3, 3) point different ways (d 20 -> 27).
-  la.push_back({400, 300}); ra.push_back({380, 300}); lb.push_back({404, 303}); rb.push_back({377, 303});
+  la.push_back({400, 300});
+  ra.push_back({380, 300});
+  lb.push_back({404, 303});
+  rb.push_back({377, 303});
   // 3: parallax fails: disparity 10 -> 21 (ratio 2.1 > 1.6).
-  la.push_back({500, 50}); ra.push_back({490, 50}); lb.push_back({501, 50}); rb.push_back({480, 50});
+  la.push_back({500, 50});
+  ra.push_back({490, 50});
+  lb.push_back({501, 50});
+  rb.push_back({480, 50});
   // 4: vertical flows disagree by 6 px (> epipolar tolerance).
-  la.push_back({200, 400}); ra.push_back({180, 400}); lb.push_back({210, 400}); rb.push_back({189, 406});
+  la.push_back({200, 400});
+  ra.push_back({180, 400});
+  lb.push_back({210, 400});
+  rb.push_back({189, 406});
   const std::vector<int> seeds = {1, 2, 3, 4, 5};
   const Features fla = MakeFeatures(la, seeds), fra = MakeFeatures(ra, seeds),
                  flb = MakeFeatures(lb, seeds), frb = MakeFeatures(rb, seeds);
@@ -102,8 +117,8 @@ TEST(StereoVoMatching, QuadrilateralCheckRejectsInconsistentMatches) {
   EXPECT_EQ(stats.parallax_rejected, 1);
   // Closing the loop of point 1 makes it pass.
   temporal_right[1] = 1;
-  quads = CloseQuadrilaterals(fla, fra, flb, frb, stereo_a, stereo_b, temporal_left,
-                              temporal_right, opts, &stats);
+  quads = CloseQuadrilaterals(fla, fra, flb, frb, stereo_a, stereo_b, temporal_left, temporal_right,
+                              opts, &stats);
   EXPECT_EQ(quads.size(), 2u);
   // A missing stereo match at b breaks the loop too.
   const std::vector<int> stereo_b_missing = {-1, 1, 2, 3, 4};

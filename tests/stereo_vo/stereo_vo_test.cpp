@@ -20,9 +20,9 @@ using fl::test::stereo::TestCalibration;
 using fl::test::stereo::Texture;
 
 constexpr Utime kT0 = 1000000000;
-constexpr Utime kDt = 100000;  // 10 Hz
-constexpr double kDepth = 5.0;    // [m] plane distance
-constexpr double kStep = 0.05;    // [m] camera x per frame (5 px of image motion)
+constexpr Utime kDt = 100000;   // 10 Hz
+constexpr double kDepth = 5.0;  // [m] plane distance
+constexpr double kStep = 0.05;  // [m] camera x per frame (5 px of image motion)
 
 class StereoVoTest : public ::testing::Test {
  protected:
@@ -69,8 +69,7 @@ TEST_F(StereoVoTest, TracksSidewaysMotionOfAPlane) {
       EXPECT_NEAR(f.T_i_j.translation().y(), -3 * kStep, 0.01);
       EXPECT_NEAR(f.T_i_j.translation().x(), 0.0, 0.03);
       // Information: symmetric, positive definite; sideways (y) best observed.
-      EXPECT_LT((f.information - f.information.transpose()).norm(),
-                1e-9 * f.information.norm());
+      EXPECT_LT((f.information - f.information.transpose()).norm(), 1e-9 * f.information.norm());
       Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(f.information);
       EXPECT_GT(eig.eigenvalues().minCoeff(), 0.0);
       EXPECT_GT(f.information(1, 1), f.information(0, 0));

@@ -3,18 +3,18 @@
 // compares with GROUND_TRUTH: KITTI segment drift over the lengths that fit the path, per-frame
 // relative error, end-point error, time per frame (AddStereoFrame only, one thread), lost
 // frames; draws the trajectory against ground truth into a PNG.
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <iostream>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-
-#include <chrono>
-#include <ctime>
-#include <cstdio>
-#include <filesystem>
-#include <iostream>
 #include <sstream>
-#include <unistd.h>
 
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/channels.hpp"
@@ -84,8 +84,9 @@ void DrawTrajectories(const fl::eval::Trajectory& est, const fl::eval::Trajector
   draw(est, cv::Scalar(0, 0, 220));
   cv::putText(img, title, {15, 30}, cv::FONT_HERSHEY_SIMPLEX, 0.6, cv::Scalar(0, 0, 0), 1,
               cv::LINE_AA);
-  cv::putText(img, "black: ground truth   red: stereo VO   grid " + std::to_string(int(step)) +
-                       " m   up = x forward, left = y left",
+  cv::putText(img,
+              "black: ground truth   red: stereo VO   grid " + std::to_string(int(step)) +
+                  " m   up = x forward, left = y left",
               {15, H - 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   fs::create_directories(fs::path(path).parent_path());
   if (!cv::imwrite(path, img)) throw std::runtime_error("cannot write " + path);
@@ -113,9 +114,8 @@ RunOutput RunFolder(const std::string& folder, const fl::vo::StereoVoOptions& op
   std::vector<double> ms, cpu_ms;
   int frames = 0, lost = 0, rejected = 0, keyframes = 0, factors = 0;
   double inliers_sum = 0;
-  fl::bench::Progress progress("bench stereo " + name, conv.messages.count("STEREO")
-                                                           ? conv.messages.at("STEREO")
-                                                           : 0);
+  fl::bench::Progress progress("bench stereo " + name,
+                               conv.messages.count("STEREO") ? conv.messages.at("STEREO") : 0);
   while (reader.Next(&ev)) {
     const int size = static_cast<int>(ev.data.size());
     if (ev.channel == fl::channels::kStereoCalibration && !vo) {
@@ -205,9 +205,10 @@ RunOutput RunFolder(const std::string& folder, const fl::vo::StereoVoOptions& op
   note << " m (" << drift.segments << " segments, every frame a start); targets drift <= 0.8 %"
        << (drift.trans_pct <= 0.8 ? " met" : " NOT met") << ", <= 1.0 deg/100 m"
        << (drift.rot_deg_per_100m <= 1.0 ? " met" : " NOT met") << ", median <= 15 ms"
-       << (st.median <= 15.0 ? " met" : " NOT met") << " (wall; thread CPU median "
-       << cpu.median << " ms)" << ", no lost frames"
-       << (lost + rejected == 0 ? " met" : " NOT met") << "; one thread, decoding excluded";
+       << (st.median <= 15.0 ? " met" : " NOT met") << " (wall; thread CPU median " << cpu.median
+       << " ms)"
+       << ", no lost frames" << (lost + rejected == 0 ? " met" : " NOT met")
+       << "; one thread, decoding excluded";
   out.run.note = note.str();
   const std::string png = png_dir + "/stereo_" + name + ".png";
   fl::eval::WriteTrajectoryTum(est, png_dir + "/stereo_" + name + "_vo.tum");
@@ -255,8 +256,8 @@ int main(int argc, char** argv) {
     if (!config.empty()) options = fl::LoadYamlFile<fl::vo::StereoVoOptions>(config);
     std::vector<std::string> list;
     if (folders.empty()) {
-      const bool is_kitti = fs::exists(args.data_dir + "/image_00") ||
-                            fs::exists(args.data_dir + "/image_0");
+      const bool is_kitti =
+          fs::exists(args.data_dir + "/image_00") || fs::exists(args.data_dir + "/image_0");
       list.push_back(is_kitti ? args.data_dir
                               : args.data_dir + "/stereo/kitti_raw_2011_09_26_drive_0001");
     } else {
@@ -265,9 +266,8 @@ int main(int argc, char** argv) {
         if (!f.empty()) list.push_back(f);
       }
     }
-    const std::string tmp = (fs::temp_directory_path() / ("fl_bench_stereo_" +
-                                                          std::to_string(::getpid())))
-                                .string();
+    const std::string tmp =
+        (fs::temp_directory_path() / ("fl_bench_stereo_" + std::to_string(::getpid()))).string();
     fs::create_directories(tmp);
     fl::bench::Report report("stereo");
     for (const std::string& folder : list) {

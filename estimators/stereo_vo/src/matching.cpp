@@ -1,11 +1,10 @@
 #include "fusionloc/stereo_vo/matching.hpp"
 
-#include <opencv2/core/hal/hal.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <opencv2/core/hal/hal.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace fl::vo {
 namespace {
@@ -159,17 +158,16 @@ std::vector<int> MatchStereo(const Features& left, const Features& right,
   constexpr float kMinDisparity = 1e-3f;  // disparity strictly positive
   for (int i = 0; i < left.size(); ++i) {
     const cv::KeyPoint& kl = left.keypoints[static_cast<size_t>(i)];
-    const Best b = BestInWindow(left.descriptors.ptr<uint8_t>(i), kl.octave, right,
-                                kl.pt.x - dmax, kl.pt.x - kMinDisparity, kl.pt.y - tol,
-                                kl.pt.y + tol);
+    const Best b = BestInWindow(left.descriptors.ptr<uint8_t>(i), kl.octave, right, kl.pt.x - dmax,
+                                kl.pt.x - kMinDisparity, kl.pt.y - tol, kl.pt.y + tol);
     if (!Accept(b, options)) continue;
     // Mutual check: the right feature's best left match in its own window must be i.
     int& rev = reverse[static_cast<size_t>(b.index)];
     if (rev == -2) {
       const cv::KeyPoint& kr = right.keypoints[static_cast<size_t>(b.index)];
-      const Best br = BestInWindow(right.descriptors.ptr<uint8_t>(b.index), kr.octave, left,
-                                   kr.pt.x + kMinDisparity, kr.pt.x + dmax, kr.pt.y - tol,
-                                   kr.pt.y + tol);
+      const Best br =
+          BestInWindow(right.descriptors.ptr<uint8_t>(b.index), kr.octave, left,
+                       kr.pt.x + kMinDisparity, kr.pt.x + dmax, kr.pt.y - tol, kr.pt.y + tol);
       rev = Accept(br, options) ? br.index : -1;
     }
     if (rev == i) result[static_cast<size_t>(i)] = b.index;
@@ -186,8 +184,8 @@ std::vector<int> MatchTemporal(const Features& from, const Features& to,
     const cv::Point2f& p = predicted[static_cast<size_t>(i)];
     if (p.x < 0) continue;
     const Best b = BestInWindow(from.descriptors.ptr<uint8_t>(i),
-                                from.keypoints[static_cast<size_t>(i)].octave, to, p.x - r,
-                                p.x + r, p.y - r, p.y + r);
+                                from.keypoints[static_cast<size_t>(i)].octave, to, p.x - r, p.x + r,
+                                p.y - r, p.y + r);
     if (Accept(b, options)) result[static_cast<size_t>(i)] = b.index;
   }
   return result;

@@ -95,7 +95,9 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
   std::sort(by_disparity.begin(), by_disparity.end());
   const int pool_size = std::max(std::min(n, 8), n / 2);
   std::uniform_int_distribution<int> pick_pool(0, pool_size - 1);
-  auto pick = [&](std::mt19937&) { return by_disparity[static_cast<size_t>(pick_pool(rng))].second; };
+  auto pick = [&](std::mt19937&) {
+    return by_disparity[static_cast<size_t>(pick_pool(rng))].second;
+  };
 
   auto count_inliers = [&](const Eigen::Isometry3d& T, std::vector<int>* inliers) {
     inliers->clear();
@@ -117,8 +119,10 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
   for (; it < needed && it < options.max_iterations; ++it) {
     int s[3];
     s[0] = pick(rng);
-    do s[1] = pick(rng); while (s[1] == s[0]);
-    do s[2] = pick(rng); while (s[2] == s[0] || s[2] == s[1]);
+    do s[1] = pick(rng);
+    while (s[1] == s[0]);
+    do s[2] = pick(rng);
+    while (s[2] == s[0] || s[2] == s[1]);
     Eigen::Isometry3d T;
     if (!SolveRigidSvd(p_a, p_b, {s[0], s[1], s[2]}, &T)) continue;
     count_inliers(T, &current);
@@ -248,10 +252,9 @@ RefineResult RefineMotion(const StereoCamera& cam, const std::vector<StereoCorre
       problem->AddResidualBlock(
           StereoReprojectionCost::Create(cam, T0, c.p_a, c.obs_b, StereoReprojectionCost::kForward),
           robust ? new ceres::HuberLoss(options.huber_px) : nullptr, delta);
-      problem->AddResidualBlock(
-          StereoReprojectionCost::Create(cam, T0, c.p_b, c.obs_a,
-                                         StereoReprojectionCost::kBackward),
-          robust ? new ceres::HuberLoss(options.huber_px) : nullptr, delta);
+      problem->AddResidualBlock(StereoReprojectionCost::Create(cam, T0, c.p_b, c.obs_a,
+                                                               StereoReprojectionCost::kBackward),
+                                robust ? new ceres::HuberLoss(options.huber_px) : nullptr, delta);
     }
   };
 

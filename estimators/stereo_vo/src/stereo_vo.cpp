@@ -1,14 +1,13 @@
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
 
-#include "fusionloc/common/geometry.hpp"
-
-#include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
-
 #include <chrono>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
 #include <sstream>
 #include <stdexcept>
+
+#include "fusionloc/common/geometry.hpp"
 
 namespace fl::vo {
 namespace {
@@ -37,10 +36,14 @@ cv::Mat ToGray(const cv::Mat& image) {
 
 const char* ToString(TrackingState s) {
   switch (s) {
-    case TrackingState::kInitialized: return "initialized";
-    case TrackingState::kTracked: return "tracked";
-    case TrackingState::kNotTracked: return "not tracked";
-    case TrackingState::kRejected: return "rejected";
+    case TrackingState::kInitialized:
+      return "initialized";
+    case TrackingState::kTracked:
+      return "tracked";
+    case TrackingState::kNotTracked:
+      return "not tracked";
+    case TrackingState::kRejected:
+      return "rejected";
   }
   return "?";
 }
@@ -117,16 +120,18 @@ fl::Status StereoVoOptions::Validate() const {
 
 struct StereoVo::Frame {
   Utime utime = 0;
-  cv::Mat left, right;             // gray
-  std::vector<float> right_x;       // per left feature with a stereo match: right x [px]
+  cv::Mat left, right;         // gray
+  std::vector<float> right_x;  // per left feature with a stereo match: right x [px]
   Features fl, fr;
-  std::vector<int> stereo;         // left -> right
-  std::vector<int64_t> track_id;   // per left feature with a stereo match, else -1
+  std::vector<int> stereo;        // left -> right
+  std::vector<int64_t> track_id;  // per left feature with a stereo match, else -1
   int stereo_matches = 0;
 };
 
 StereoVo::StereoVo(const StereoVoOptions& options, const StereoCalibration& calibration)
-    : options_(options), calibration_(calibration), camera_(calibration.camera()),
+    : options_(options),
+      calibration_(calibration),
+      camera_(calibration.camera()),
       extractor_(options.features) {
   if (auto s = options.Validate(); !s.ok()) {
     throw std::invalid_argument("stereo VO options: " + s.message());
@@ -200,15 +205,15 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
 
   // ---- input checks ----
   if (left_in.empty() || right_in.empty()) {
-    return reject(TrackingState::kRejected, std::string(left_in.empty() ? "left" : "right") +
-                                                " image is empty");
+    return reject(TrackingState::kRejected,
+                  std::string(left_in.empty() ? "left" : "right") + " image is empty");
   }
   if (left_in.size() != right_in.size() || left_in.cols != calibration_.width ||
       left_in.rows != calibration_.height) {
     return reject(TrackingState::kRejected,
                   "image sizes left " + SizeText(left_in) + ", right " + SizeText(right_in) +
-                      " do not match the calibration " + std::to_string(calibration_.width) +
-                      "x" + std::to_string(calibration_.height) +
+                      " do not match the calibration " + std::to_string(calibration_.width) + "x" +
+                      std::to_string(calibration_.height) +
                       "; publish the rectified images the calibration was made for");
   }
   const cv::Mat left = ToGray(left_in), right = ToGray(right_in);
@@ -227,13 +232,13 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
   const double mean_l = cv::mean(left)[0], mean_r = cv::mean(right)[0];
   if (std::min(mean_l, mean_r) < options_.min_mean_intensity) {
     return reject(TrackingState::kNotTracked,
-                  "black frame (mean gray " + std::to_string(static_cast<int>(std::min(
-                                                  mean_l, mean_r))) + ")");
+                  "black frame (mean gray " +
+                      std::to_string(static_cast<int>(std::min(mean_l, mean_r))) + ")");
   }
   if (std::max(mean_l, mean_r) > options_.max_mean_intensity) {
     return reject(TrackingState::kNotTracked,
-                  "saturated frame (mean gray " + std::to_string(static_cast<int>(std::max(
-                                                      mean_l, mean_r))) + ")");
+                  "saturated frame (mean gray " +
+                      std::to_string(static_cast<int>(std::max(mean_l, mean_r))) + ")");
   }
 
   // ---- features and stereo matching ----
@@ -282,8 +287,8 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       const double d = pl.x - f->fr.keypoints[static_cast<size_t>(j)].pt.x;
       if (!(d > 0)) continue;
       result.keyframe_points.push_back(camera_.Triangulate(pl.x, pl.y, d).cast<float>());
-      result.keyframe_intensities.push_back(
-          f->left.at<uint8_t>(cvRound(pl.y), cvRound(pl.x)) / 255.0f);
+      result.keyframe_intensities.push_back(f->left.at<uint8_t>(cvRound(pl.y), cvRound(pl.x)) /
+                                            255.0f);
     }
   };
   auto assign_new_tracks = [&](Frame* f) {
@@ -300,11 +305,10 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       ++segment_;
       result.new_segment = true;
       result.segment = segment_;
-      result.message = "initialized a new segment: " +
-                       std::to_string((utime - last_good_->utime) * 1e-6) +
-                       " s since the last tracked frame (max_gap_s " +
-                       std::to_string(options_.max_gap_s) +
-                       "); the motion across the gap is unknown and no factor links it";
+      result.message =
+          "initialized a new segment: " + std::to_string((utime - last_good_->utime) * 1e-6) +
+          " s since the last tracked frame (max_gap_s " + std::to_string(options_.max_gap_s) +
+          "); the motion across the gap is unknown and no factor links it";
     } else {
       result.message = "initialized";
     }
@@ -351,9 +355,8 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
           probe[static_cast<size_t>(i)] = prev.fl.keypoints[static_cast<size_t>(i)].pt;
         }
       }
-      const std::vector<int> wide = MatchTemporal(prev.fl, cur->fl, probe,
-                                                  options_.matching.window_unpredicted_px,
-                                                  options_.matching);
+      const std::vector<int> wide = MatchTemporal(
+          prev.fl, cur->fl, probe, options_.matching.window_unpredicted_px, options_.matching);
       std::vector<float> dx, dy;
       for (size_t i = 0; i < wide.size(); ++i) {
         if (wide[i] < 0) continue;
@@ -365,8 +368,8 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
         std::nth_element(dy.begin(), dy.begin() + static_cast<long>(dy.size() / 2), dy.end());
         shift = cv::Point2f(dx[dx.size() / 2], dy[dy.size() / 2]);
         // Translation makes the flow non-uniform: allow for it around the global shift.
-        radius = std::min(options_.matching.window_unpredicted_px,
-                          3.0 * options_.matching.window_px);
+        radius =
+            std::min(options_.matching.window_unpredicted_px, 3.0 * options_.matching.window_px);
       } else {
         radius = options_.matching.window_unpredicted_px;
       }
@@ -459,8 +462,7 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       const RefineResult refined = RefineMotion(camera_, corr, inliers, T_a_b, options_.refine);
       if (!refined.ok) {
         result.stats.ms_motion = NowMs() - t0;
-        return reject(TrackingState::kNotTracked,
-                      "motion refinement failed (degenerate geometry)");
+        return reject(TrackingState::kNotTracked, "motion refinement failed (degenerate geometry)");
       }
       T_a_b = refined.T_a_b;
       cov = refined.covariance;
@@ -475,8 +477,8 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
         if (!camera_.Project(T_b_a * c.p_a, &fwd) || !camera_.Project(T_a_b * c.p_b, &bwd)) {
           continue;
         }
-        const double e = std::max((fwd - c.obs_b).cwiseAbs().maxCoeff(),
-                                  (bwd - c.obs_a).cwiseAbs().maxCoeff());
+        const double e =
+            std::max((fwd - c.obs_b).cwiseAbs().maxCoeff(), (bwd - c.obs_a).cwiseAbs().maxCoeff());
         if (e <= options_.ransac.inlier_threshold_px) next.push_back(i);
       }
       if (static_cast<int>(next.size()) < options_.ransac.min_inliers) break;
@@ -487,9 +489,9 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
   result.stats.ms_motion = NowMs() - t0;
   const double speed = T_a_b.translation().norm() / std::max(dt_s, 1e-6);
   if (speed > options_.max_speed_mps) {
-    return reject(TrackingState::kNotTracked,
-                  "implausible motion " + std::to_string(speed) + " m/s (max_speed_mps " +
-                      std::to_string(options_.max_speed_mps) + ")");
+    return reject(TrackingState::kNotTracked, "implausible motion " + std::to_string(speed) +
+                                                  " m/s (max_speed_mps " +
+                                                  std::to_string(options_.max_speed_mps) + ")");
   }
 
   // ---- accept: pose chain, tracks, keyframes ----

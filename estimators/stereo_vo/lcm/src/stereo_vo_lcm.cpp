@@ -48,9 +48,8 @@ fl::Status StereoImagesToGray(const bot_core::images_t& images, cv::Mat* left, c
   const int16_t kLeft = bot_core::images_t::LEFT;
   const int16_t kRight = bot_core::images_t::RIGHT;
   int il = -1, ir = -1;
-  const int n = std::min<int>(images.n_images,
-                              static_cast<int>(std::min(images.images.size(),
-                                                        images.image_types.size())));
+  const int n = std::min<int>(
+      images.n_images, static_cast<int>(std::min(images.images.size(), images.image_types.size())));
   for (int i = 0; i < n; ++i) {
     if (images.image_types[static_cast<size_t>(i)] == kLeft && il < 0) il = i;
     if (images.image_types[static_cast<size_t>(i)] == kRight && ir < 0) ir = i;

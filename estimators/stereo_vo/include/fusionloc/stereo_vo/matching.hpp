@@ -16,11 +16,11 @@
 namespace fl::vo {
 
 struct FeatureOptions {
-  int fast_threshold = 12;      // [gray levels] FAST corner threshold
-  int cell_size_px = 32;        // [px] grid bucketing cell (features spread evenly)
-  int features_per_cell = 4;    // strongest FAST corners kept per cell and pyramid level
-  int pyramid_levels = 1;       // ORB pyramid levels (1 = full resolution only)
-  double scale_factor = 1.2;    // [-] ORB pyramid scale between levels
+  int fast_threshold = 12;    // [gray levels] FAST corner threshold
+  int cell_size_px = 32;      // [px] grid bucketing cell (features spread evenly)
+  int features_per_cell = 4;  // strongest FAST corners kept per cell and pyramid level
+  int pyramid_levels = 1;     // ORB pyramid levels (1 = full resolution only)
+  double scale_factor = 1.2;  // [-] ORB pyramid scale between levels
   template <class A>
   void Serialize(A* a) {
     a->Visit("fast_threshold", &fast_threshold);
@@ -78,15 +78,15 @@ class FeatureExtractor {
 };
 
 struct MatchOptions {
-  double epipolar_tolerance_px = 3.0;   // [px] |v_left - v_right| for stereo matches
-  double max_disparity_px = 160.0;      // [px] d_max; disparity must be in (0, d_max]
-  int max_hamming = 60;                 // [bits of 256] descriptor distance limit
-  double ratio = 0.9;                   // best/second-best distance ratio (1 = off)
-  double window_px = 20.0;              // [px] temporal half-window around the prediction
-  double window_unpredicted_px = 250.0; // [px] half-window of the global-shift search
-  double slope_threshold = 0.35;        // K: |tan(angle between left and right flow)|
-  double slope_min_flow_px = 3.0;       // [px] flows shorter than this skip the slope test
-  double max_disparity_ratio = 1.6;     // parallax: d_t+1 / d_t within [1/r, r]
+  double epipolar_tolerance_px = 3.0;    // [px] |v_left - v_right| for stereo matches
+  double max_disparity_px = 160.0;       // [px] d_max; disparity must be in (0, d_max]
+  int max_hamming = 60;                  // [bits of 256] descriptor distance limit
+  double ratio = 0.9;                    // best/second-best distance ratio (1 = off)
+  double window_px = 20.0;               // [px] temporal half-window around the prediction
+  double window_unpredicted_px = 250.0;  // [px] half-window of the global-shift search
+  double slope_threshold = 0.35;         // K: |tan(angle between left and right flow)|
+  double slope_min_flow_px = 3.0;        // [px] flows shorter than this skip the slope test
+  double max_disparity_ratio = 1.6;      // parallax: d_t+1 / d_t within [1/r, r]
   template <class A>
   void Serialize(A* a) {
     a->Visit("epipolar_tolerance_px", &epipolar_tolerance_px);
@@ -119,9 +119,9 @@ struct Quad {
 };
 
 struct QuadStats {
-  int candidates = 0;       // left_a features with a stereo match at a
-  int not_closed = 0;       // a temporal or stereo link missing or the loop ends elsewhere
-  int slope_rejected = 0;   // the slope test failed
+  int candidates = 0;         // left_a features with a stereo match at a
+  int not_closed = 0;         // a temporal or stereo link missing or the loop ends elsewhere
+  int slope_rejected = 0;     // the slope test failed
   int parallax_rejected = 0;  // disparity out of (0, d_max] or changed too much
   int kept = 0;
 };

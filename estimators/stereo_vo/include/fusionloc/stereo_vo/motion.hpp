@@ -58,11 +58,11 @@ bool SolveRigidSvd(const std::vector<Eigen::Vector3d>& p_a, const std::vector<Ei
                    const std::vector<double>* weights = nullptr);
 
 struct RansacOptions {
-  int max_iterations = 300;            // upper bound on random minimal samples
-  double confidence = 0.995;           // [-] stop when an all-inlier sample is this likely
-  double inlier_threshold_px = 2.0;    // [px] max reprojection error (left u, v, right u) at b
-  int min_inliers = 12;                // fewer inliers: no motion
-  int seed = 42;                       // fixed seed: deterministic results
+  int max_iterations = 300;          // upper bound on random minimal samples
+  double confidence = 0.995;         // [-] stop when an all-inlier sample is this likely
+  double inlier_threshold_px = 2.0;  // [px] max reprojection error (left u, v, right u) at b
+  int min_inliers = 12;              // fewer inliers: no motion
+  int seed = 42;                     // fixed seed: deterministic results
   template <class A>
   void Serialize(A* a) {
     a->Visit("max_iterations", &max_iterations);
@@ -92,9 +92,9 @@ RansacResult RansacMotion(const StereoCamera& cam, const std::vector<StereoCorre
                           const RansacOptions& options);
 
 struct RefineOptions {
-  int max_iterations = 5;           // Levenberg-Marquardt iterations (converges in 2-4)
-  double huber_px = 1.0;            // [px] Huber loss width (down-weights remaining outliers)
-  double min_sigma_px = 0.2;        // [px] lower bound on the measured reprojection noise
+  int max_iterations = 5;     // Levenberg-Marquardt iterations (converges in 2-4)
+  double huber_px = 1.0;      // [px] Huber loss width (down-weights remaining outliers)
+  double min_sigma_px = 0.2;  // [px] lower bound on the measured reprojection noise
   // Multiplies the covariance: the refinement treats the triangulated points as exact, so its
   // covariance is optimistic; >1 compensates (measured on KITTI, see docs/STEREO_VO.md).
   double covariance_scale = 1.0;
@@ -117,9 +117,9 @@ struct RefineResult {
   // Covariance of delta (T_a_b = T_hat Exp(delta), delta = [rho; phi]) from the Gauss-Newton
   // Hessian: sigma^2 (J^T J)^-1, sigma^2 estimated from the residuals.
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
-  double rms_px = 0;          // [px] residual RMS at the solution
-  double initial_cost = 0;    // Ceres cost (1/2 sum rho(r^2)) before
-  double final_cost = 0;      // and after
+  double rms_px = 0;        // [px] residual RMS at the solution
+  double initial_cost = 0;  // Ceres cost (1/2 sum rho(r^2)) before
+  double final_cost = 0;    // and after
   int iterations = 0;
 };
 

@@ -31,7 +31,10 @@ class StereoReprojectionCost {
   StereoReprojectionCost(const StereoCamera& cam, const Eigen::Isometry3d& T0_a_b,
                          const Eigen::Vector3d& point, const Eigen::Vector3d& observed_uvu,
                          Direction direction)
-      : cam_(cam), R0_(T0_a_b.linear()), t0_(T0_a_b.translation()), obs_(observed_uvu),
+      : cam_(cam),
+        R0_(T0_a_b.linear()),
+        t0_(T0_a_b.translation()),
+        obs_(observed_uvu),
         direction_(direction) {
     // Forward: keep q = R0^T (p_a - t0); backward: keep p_b.
     point_ = direction == kForward ? Eigen::Vector3d(R0_.transpose() * (point - t0_)) : point;
@@ -101,8 +104,7 @@ class StereoPointCostA {
     return true;
   }
   static ceres::CostFunction* Create(const StereoCamera& cam, const Eigen::Vector3d& obs) {
-    return new ceres::AutoDiffCostFunction<StereoPointCostA, 3, 3>(
-        new StereoPointCostA(cam, obs));
+    return new ceres::AutoDiffCostFunction<StereoPointCostA, 3, 3>(new StereoPointCostA(cam, obs));
   }
 
  private:

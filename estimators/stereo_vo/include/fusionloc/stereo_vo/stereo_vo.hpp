@@ -14,11 +14,10 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <memory>
+#include <opencv2/core.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
@@ -29,11 +28,11 @@ namespace fl::vo {
 
 // Calibration of a rectified stereo rig (the library's own plain struct).
 struct StereoCalibration {
-  double fx = 0, fy = 0;    // [px] focal lengths (both cameras, rectified)
-  double cx = 0, cy = 0;    // [px] principal point
-  double baseline = 0;      // [m] right camera at +baseline along the left camera's x
+  double fx = 0, fy = 0;      // [px] focal lengths (both cameras, rectified)
+  double cx = 0, cy = 0;      // [px] principal point
+  double baseline = 0;        // [m] right camera at +baseline along the left camera's x
   int width = 0, height = 0;  // [px] image size
-  bool rectified = true;    // the pair must be rectified and row-aligned
+  bool rectified = true;      // the pair must be rectified and row-aligned
   Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();  // left camera in base
 
   // Error naming the bad field and the fix, or OK.
@@ -46,26 +45,26 @@ struct StereoVoOptions {
   MatchOptions matching;
   RansacOptions ransac;
   RefineOptions refine;
-  bool use_refinement = true;             // Ceres refinement after RANSAC (off: SVD only)
+  bool use_refinement = true;  // Ceres refinement after RANSAC (off: SVD only)
   // Sub-pixel disparities: each stereo match's right x by Lucas-Kanade alignment of the left
   // patch (left corners stay as detected; see docs/STEREO_VO.md for why not temporally).
   bool subpixel_refinement = true;
-  int subpixel_window_px = 11;            // [px] LK patch size (odd)
-  double subpixel_max_shift_px = 1.5;     // [px] larger corrections drop the match
-  int refine_rounds = 2;                  // refine, re-select inliers by reprojection, repeat
+  int subpixel_window_px = 11;         // [px] LK patch size (odd)
+  double subpixel_max_shift_px = 1.5;  // [px] larger corrections drop the match
+  int refine_rounds = 2;               // refine, re-select inliers by reprojection, repeat
   // Keyframes: a new one when the motion since the last keyframe or the loss of its features
   // exceeds one of these.
-  double keyframe_translation_m = 1.0;    // [m]
-  double keyframe_rotation_deg = 10.0;    // [deg]
-  double keyframe_min_overlap = 0.5;      // [-] fraction of the keyframe's features still tracked
-  double keyframe_max_interval_s = 2.0;   // [s] at least one keyframe this often
+  double keyframe_translation_m = 1.0;   // [m]
+  double keyframe_rotation_deg = 10.0;   // [deg]
+  double keyframe_min_overlap = 0.5;     // [-] fraction of the keyframe's features still tracked
+  double keyframe_max_interval_s = 2.0;  // [s] at least one keyframe this often
   // Frame checks.
-  double min_mean_intensity = 8.0;        // [gray] darker: "black frame", not tracked
-  double max_mean_intensity = 247.0;      // [gray] brighter: "saturated frame", not tracked
-  int min_features = 40;                  // fewer corners in the left image: "low texture"
-  int min_quads = 15;                     // fewer closed quadrilaterals: not tracked
-  double max_speed_mps = 40.0;            // [m/s] faster estimated motion is rejected as wrong
-  double max_gap_s = 1.0;                 // [s] longer since the last good frame: new segment
+  double min_mean_intensity = 8.0;    // [gray] darker: "black frame", not tracked
+  double max_mean_intensity = 247.0;  // [gray] brighter: "saturated frame", not tracked
+  int min_features = 40;              // fewer corners in the left image: "low texture"
+  int min_quads = 15;                 // fewer closed quadrilaterals: not tracked
+  double max_speed_mps = 40.0;        // [m/s] faster estimated motion is rejected as wrong
+  double max_gap_s = 1.0;             // [s] longer since the last good frame: new segment
   template <class A>
   void Serialize(A* a) {
     a->Visit("features", &features);
@@ -112,11 +111,11 @@ struct KeyframeFactor {
 
 struct FrameStats {
   int features_left = 0, features_right = 0;
-  int stereo_matches = 0;     // at this frame
-  QuadStats quads;            // quadrilateral check against the previous good frame
-  int subpixel_dropped = 0;   // stereo matches dropped by the sub-pixel alignment
-  int ransac_inliers = 0;     // RANSAC inliers
-  int inliers = 0;            // inliers of the final refinement
+  int stereo_matches = 0;    // at this frame
+  QuadStats quads;           // quadrilateral check against the previous good frame
+  int subpixel_dropped = 0;  // stereo matches dropped by the sub-pixel alignment
+  int ransac_inliers = 0;    // RANSAC inliers
+  int inliers = 0;           // inliers of the final refinement
   int ransac_iterations = 0;
   double reprojection_rms_px = 0;
   double ms_total = 0, ms_features = 0, ms_matching = 0, ms_motion = 0;
@@ -124,9 +123,9 @@ struct FrameStats {
 
 struct StereoVoResult {
   TrackingState state = TrackingState::kRejected;
-  std::string message;       // human-readable: why not tracked, new segment, ...
+  std::string message;  // human-readable: why not tracked, new segment, ...
   Utime utime = 0;
-  bool pose_valid = false;   // T_world_* meaningful (false before the first good frame)
+  bool pose_valid = false;  // T_world_* meaningful (false before the first good frame)
   Eigen::Isometry3d T_world_base = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();
   // Motion of the camera since the previous good frame (T_prev_cur), when tracked.
@@ -134,7 +133,7 @@ struct StereoVoResult {
   int segment = 0;           // increments when the motion chain breaks (gap too long)
   bool new_segment = false;  // this frame starts a new segment (no factor links it back)
   bool is_keyframe = false;
-  int64_t keyframe_id = -1;  // id of this frame if it is a keyframe
+  int64_t keyframe_id = -1;              // id of this frame if it is a keyframe
   std::optional<KeyframeFactor> factor;  // from the previous keyframe to this one
   // Keyframe points, left camera frame of this keyframe [m], with gray levels in [0, 1].
   std::vector<Eigen::Vector3f> keyframe_points;
@@ -164,14 +163,14 @@ class StereoVo {
   StereoCalibration calibration_;
   StereoCamera camera_;
   FeatureExtractor extractor_;
-  std::unique_ptr<Frame> last_good_;   // previous successfully processed frame
-  Utime last_utime_ = -1;              // last accepted input time
+  std::unique_ptr<Frame> last_good_;  // previous successfully processed frame
+  Utime last_utime_ = -1;             // last accepted input time
   bool initialized_ = false;
   int segment_ = 0;
   // Pose chain.
   Eigen::Isometry3d T_world_camera_ = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d T_prev_velocity_ = Eigen::Isometry3d::Identity();  // last T_prev_cur
-  double velocity_dt_s_ = 0;          // time of that motion (0: no prediction)
+  double velocity_dt_s_ = 0;  // time of that motion (0: no prediction)
   // Keyframe chain.
   int64_t next_keyframe_id_ = 0;
   int64_t keyframe_id_ = -1;
