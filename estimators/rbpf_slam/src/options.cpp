@@ -111,6 +111,8 @@ Status GraphOptions::Validate() const {
   }
   FL_RETURN_IF_ERROR(Positive("graph.loop_max_rms", loop_max_rms));
   FL_RETURN_IF_ERROR(NonNegative("graph.loop_huber_m", loop_huber_m));
+  FL_RETURN_IF_ERROR(Positive("graph.loop_max_residual_m", loop_max_residual_m));
+  FL_RETURN_IF_ERROR(Positive("graph.loop_max_residual_rad", loop_max_residual_rad));
   if (max_iterations < 1) return Status::Error("graph.max_iterations must be >= 1");
   FL_RETURN_IF_ERROR(NonNegative("graph.feedback_min_correction_m", feedback_min_correction_m));
   return Status::Ok();

@@ -35,6 +35,7 @@ double PoseGraph2D::Optimize(int max_iterations, bool* converged) {
   if (nodes_.empty()) return 0.0;
   ceres::Problem problem;
   for (const PoseGraphEdge& e : edges_) {
+    if (!e.enabled) continue;
     ceres::LossFunction* loss = e.huber_scale > 0 ? new ceres::HuberLoss(e.huber_scale) : nullptr;
     problem.AddResidualBlock(RelativePose2Cost::Create(e.T_i_j, e.information), loss,
                              nodes_[e.i].data(), nodes_[e.j].data());

@@ -362,7 +362,10 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   edge.information = icp.information;
   edge.huber_scale = g.loop_huber_m > 0 ? g.loop_huber_m / opt_.icp.sigma : 0.0;
   graph_.AddEdge(edge);
+  const int edge_index = graph_.num_edges() - 1;
   ++graph_loop_edges_;
+  OptimizeAndFeedBack(res);
+  if (!graph_.edges()[edge_index].enabled) return;  // rejected by the residual check
   ++stats_.loop_closures;
   KeyframeFactor f;
   f.keyframe_i = cand;
@@ -375,25 +378,47 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   f.rms = icp.rms;
   f.inlier_fraction = icp.inlier_fraction;
   res->factors.push_back(f);
-  OptimizeAndFeedBack(res);
 }
 
 bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   if (graph_loop_edges_ == optimized_loop_edges_) return false;
+  const GraphOptions& g = opt_.graph;
   const int last = graph_.num_nodes() - 1;
-  const fl::Pose2 before = graph_.pose(last);
-  graph_.Optimize(opt_.graph.max_iterations);
+  std::vector<fl::Pose2> before(graph_.num_nodes());
+  for (int k = 0; k < graph_.num_nodes(); ++k) before[k] = graph_.pose(k);
+  // Optimise; a loop edge the solution still disagrees with grossly is wrong: drop the worst
+  // one and optimise again (from the original values).
+  for (int round = 0; round < 5; ++round) {
+    graph_.Optimize(g.max_iterations);
+    int worst = -1;
+    double worst_score = 1.0;
+    for (int k = 0; k < graph_.num_edges(); ++k) {
+      const PoseGraphEdge& e = graph_.edges()[k];
+      if (!e.enabled || e.huber_scale <= 0.0) continue;  // only loop edges are robust
+      const fl::Pose2 err = graph_.EdgeError(k);
+      const double score = std::max(std::hypot(err.x, err.y) / g.loop_max_residual_m,
+                                    std::abs(err.theta) / g.loop_max_residual_rad);
+      if (score > worst_score) {
+        worst_score = score;
+        worst = k;
+      }
+    }
+    if (worst < 0) break;
+    graph_.DisableEdge(worst);
+    ++stats_.loop_rejections;
+    for (int k = 0; k < graph_.num_nodes(); ++k) graph_.set_pose(k, before[k]);
+  }
   optimized_loop_edges_ = graph_loop_edges_;
   if (res) res->graph_changed = true;
-  const fl::Pose2 after = graph_.pose(last);
-  const fl::Pose2 T_corr = after * before.inverse();
-  if (!opt_.graph.feed_back) return true;
-  const fl::Pose2 c = before.between(after);
-  if (std::hypot(c.x, c.y) < opt_.graph.feedback_min_correction_m && std::abs(c.theta) < 0.02) {
-    return true;
+  double moved = 0.0;
+  for (int k = 0; k < graph_.num_nodes(); ++k) {
+    const fl::Pose2 c = before[k].between(graph_.pose(k));
+    moved = std::max(moved, std::hypot(c.x, c.y) + std::abs(c.theta) * 5.0);  // 0.01 rad ~ 5 cm
   }
+  if (!g.feed_back || moved < g.feedback_min_correction_m) return true;
   // Feed back: shift every particle by the correction of the latest keyframe and give all of
   // them the map rebuilt from the corrected keyframes.
+  const fl::Pose2 T_corr = graph_.pose(last) * before[last].inverse();
   for (Particle& p : particles_) p.pose = T_corr * p.pose;
   RebuildMaps();
   ++stats_.map_rebuilds;

@@ -55,6 +55,7 @@ struct PoseGraphEdge {
   fl::Pose2 T_i_j;
   Eigen::Matrix3d information = Eigen::Matrix3d::Identity();
   double huber_scale = 0.0;  // > 0: robust (Huber) loss with this scale on the whitened residual
+  bool enabled = true;       // disabled edges are kept but not optimised (rejected loop closures)
 };
 
 class PoseGraph2D {
@@ -70,6 +71,12 @@ class PoseGraph2D {
   fl::Pose2 pose(int i) const { return {nodes_[i][0], nodes_[i][1], nodes_[i][2]}; }
   void set_pose(int i, const fl::Pose2& p) { nodes_[i] = {p.x, p.y, p.theta}; }
   const std::vector<PoseGraphEdge>& edges() const { return edges_; }
+  void DisableEdge(int k) { edges_.at(k).enabled = false; }
+  // Error of edge k at the current poses: T_i_j^-1 * (pose(i)^-1 * pose(j)).
+  fl::Pose2 EdgeError(int k) const {
+    const PoseGraphEdge& e = edges_.at(k);
+    return e.T_i_j.inverse() * pose(e.i).between(pose(e.j));
+  }
 
  private:
   std::vector<std::array<double, 3>> nodes_;

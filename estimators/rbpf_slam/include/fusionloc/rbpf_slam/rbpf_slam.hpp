@@ -56,7 +56,8 @@ struct RbpfSlamStats {
   int64_t keyframes = 0;
   int64_t icp_failures = 0;             // sequential keyframe ICP that failed verification
   int64_t loop_candidates = 0;
-  int64_t loop_closures = 0;            // verified and added to the graph
+  int64_t loop_closures = 0;            // verified, added to the graph and kept
+  int64_t loop_rejections = 0;          // loop edges dropped after optimisation (gross residual)
   int64_t map_rebuilds = 0;             // corrections fed back to the filter
 };
 
