@@ -410,12 +410,12 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   }
   optimized_loop_edges_ = graph_loop_edges_;
   if (res) res->graph_changed = true;
-  double moved = 0.0;
-  for (int k = 0; k < graph_.num_nodes(); ++k) {
-    const fl::Pose2 c = before[k].between(graph_.pose(k));
-    moved = std::max(moved, std::hypot(c.x, c.y) + std::abs(c.theta) * 5.0);  // 0.01 rad ~ 5 cm
+  // Feed back only when the newest keyframe (where the particles are) was corrected.
+  const fl::Pose2 c = before[last].between(graph_.pose(last));
+  if (!g.feed_back ||
+      (std::hypot(c.x, c.y) < g.feedback_min_correction_m && std::abs(c.theta) < 0.02)) {
+    return true;
   }
-  if (!g.feed_back || moved < g.feedback_min_correction_m) return true;
   // Feed back: shift every particle by the correction of the latest keyframe and give all of
   // them the map rebuilt from the corrected keyframes.
   const fl::Pose2 T_corr = graph_.pose(last) * before[last].inverse();

@@ -131,11 +131,12 @@ struct GraphOptions {
   double loop_min_inlier_fraction = 0.6;  // [-] stricter ICP verification for loop closures
   double loop_max_rms = 0.04;          // [m]
   double loop_huber_m = 0.1;           // [m] robust loss scale on loop-closure edges
-  double loop_max_residual_m = 0.3;    // [m] after optimisation, a loop edge still off by more
-  double loop_max_residual_rad = 0.1;  // [rad] than this is rejected as wrong and re-optimised
+  double loop_max_residual_m = 1.0;    // [m] after optimisation, a loop edge still off by more
+  double loop_max_residual_rad = 0.3;  // [rad] than this is rejected as wrong and re-optimised
   int max_iterations = 50;             // [-] Levenberg-Marquardt iterations per optimisation
   bool feed_back = true;               // [-] rebuild the particle maps from the corrected keyframes
-  double feedback_min_correction_m = 0.05;  // [m] ... when a keyframe moved at least this
+  double feedback_min_correction_m = 0.05;  // [m] ... when the newest keyframe moved this much
+                                            //     (or 0.02 rad)
 
   template <class A>
   void Serialize(A* a) {
