@@ -634,10 +634,7 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
   try {
     auto write = [&](const char* channel, const auto& msg, Utime utime) {
       writer.Write(channel, msg, utime);
-      ++summary.messages[channel];
-      if (summary.total_messages == 0) summary.first_utime = utime;
-      summary.last_utime = utime;
-      ++summary.total_messages;
+      summary.Count(channel, utime);
     };
     bool have_prev = false;
     Pose2 prev_odom;

@@ -582,10 +582,7 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
   try {
     auto write = [&](const char* channel, const auto& msg, Utime utime) {
       writer.Write(channel, msg, utime);
-      ++summary.messages[channel];
-      if (summary.total_messages == 0) summary.first_utime = utime;
-      summary.last_utime = utime;
-      ++summary.total_messages;
+      summary.Count(channel, utime);
     };
     Eigen::Isometry3d T_cam0_start_inv = Eigen::Isometry3d::Identity();
     if (!seq.T_cam0start_cam0.empty()) T_cam0_start_inv = seq.T_cam0start_cam0[begin].inverse();

@@ -23,6 +23,13 @@ struct ConvertSummary {
   // What the importer did that a user may want to know (skipped message types, where the
   // ground truth or time stamps came from). One sentence each.
   std::vector<std::string> notes;
+  // Counts one event written on `channel` at `utime` (keeps the counts and the span).
+  void Count(const std::string& channel, Utime utime) {
+    ++messages[channel];
+    if (total_messages == 0) first_utime = utime;
+    last_utime = utime;
+    ++total_messages;
+  }
   // Multi-line human-readable account (counts, span, warnings), for programs to print.
   std::string ToString() const;
 };
