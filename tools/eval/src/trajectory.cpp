@@ -38,6 +38,18 @@ using namespace internal;  // NOLINT: parsing helpers
 
 namespace {
 
+// A planar (x, y, theta) message as a pose; non-finite values become a NaN translation so that
+// the trajectory check reports them with the message's time.
+StampedPose PlanarPose(Utime utime, double x, double y, double theta) {
+  StampedPose p;
+  p.utime = utime;
+  p.T_world_base = Pose2(x, y, theta).ToIsometry3();
+  if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(theta)) {
+    p.T_world_base.translation().setConstant(std::nan(""));
+  }
+  return p;
+}
+
 // Name of a project message type by fingerprint, for error messages ("" if unknown).
 std::string TypeNameOfHash(int64_t hash) {
   static const std::map<int64_t, std::string> kNames = {
@@ -325,26 +337,14 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
         ++decode_failures;
         continue;
       }
-      StampedPose p;
-      p.utime = msg.utime;
-      p.T_world_base = Pose2(msg.x, msg.y, msg.theta).ToIsometry3();
-      if (!std::isfinite(msg.x) || !std::isfinite(msg.y) || !std::isfinite(msg.theta)) {
-        p.T_world_base.translation().setConstant(std::nan(""));
-      }
-      poses.push_back(p);
+      poses.push_back(PlanarPose(msg.utime, msg.x, msg.y, msg.theta));
     } else if (hash == kFusedHash) {
       fusionloc::fused_pose_t msg{};
       if (msg.decode(ev.data.data(), 0, size) != size) {
         ++decode_failures;
         continue;
       }
-      StampedPose p;
-      p.utime = msg.utime;
-      p.T_world_base = Pose2(msg.x, msg.y, msg.theta).ToIsometry3();
-      if (!std::isfinite(msg.x) || !std::isfinite(msg.y) || !std::isfinite(msg.theta)) {
-        p.T_world_base.translation().setConstant(std::nan(""));
-      }
-      poses.push_back(p);
+      poses.push_back(PlanarPose(msg.utime, msg.x, msg.y, msg.theta));
     } else {
       fusionloc::trajectory_t msg{};
       if (msg.decode(ev.data.data(), 0, size) != size) {
