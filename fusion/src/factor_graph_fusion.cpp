@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/solver_threads.hpp"
 #include "fusionloc/fusion/cost_functions.hpp"
 
 namespace fl::fusion {
@@ -520,6 +521,7 @@ SolveSummary FactorGraphFusion::SolveWindow(int first) {
       n - first <= 80 ? ceres::DENSE_NORMAL_CHOLESKY : ceres::SPARSE_NORMAL_CHOLESKY;
   options.num_threads = 1;
   options.logging_type = ceres::SILENT;
+  ConfigureSparseSolverThreads(options.num_threads);  // CHOLMOD's OpenMP teams: see header
   ceres::Solver::Summary s;
   ceres::Solve(options, &problem, &s);
   FillSummary(s, &summary);
@@ -592,6 +594,7 @@ void FullSolveJob::Run() {
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   options.num_threads = 1;
   options.logging_type = ceres::SILENT;
+  ConfigureSparseSolverThreads(options.num_threads);  // CHOLMOD's OpenMP teams: see header
   ceres::Solver::Summary s;
   ceres::Solve(options, &problem, &s);
   FillSummary(s, &summary_);

@@ -4,6 +4,8 @@
 #include <ctime>
 #include <memory>
 
+#include "fusionloc/common/solver_threads.hpp"
+
 namespace fl::fusion {
 namespace {
 
@@ -80,6 +82,7 @@ Status OptimizePoseGraph(G2oGraph* graph, const PoseGraphSolveOptions& options,
   }
   std::string error;
   if (!solver_options.IsValid(&error)) return Status::Error("Ceres options: " + error);
+  ConfigureSparseSolverThreads(options.num_threads);
   ceres::Solver::Summary summary;
   timespec cpu0{}, cpu1{};
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &cpu0);
