@@ -122,6 +122,12 @@ Status FusionOptions::Validate() const {
     return Status::Error("chain_sigma_*_min must be > 0 and the per-unit terms >= 0");
   }
   if (!(odom_max_gap_s > 0.0)) return Status::Error("odom_max_gap_s must be > 0");
+  if (!(odom_max_latency_s > 0.0)) return Status::Error("odom_max_latency_s must be > 0");
+  if (laser_chain_factors != "odometry_gaps" && laser_chain_factors != "always" &&
+      laser_chain_factors != "never") {
+    return Status::Error("laser_chain_factors '" + laser_chain_factors +
+                         "' unknown; use odometry_gaps, always or never");
+  }
   if (max_pending_factors < 1) return Status::Error("max_pending_factors must be >= 1");
   return Status::Ok();
 }
@@ -245,24 +251,10 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     prior.cost.reset(Se2PriorCost::Create(node.state, sqrt_info));
     AddGraphFactor(std::move(prior));
   }
-  if (index > 0 && options_.laser_chain_factors) {
-    const Node& prev = nodes_[index - 1];
-    const Pose2 motion = prev.T_map_base_rbpf.between(node.T_map_base_rbpf);
-    const double dist = std::hypot(motion.x, motion.y);
-    const double sxy = options_.chain_sigma_xy_min + options_.chain_sigma_xy_per_m * dist;
-    const double sth = options_.chain_sigma_theta_min +
-                       options_.chain_sigma_theta_per_rad * std::fabs(motion.theta);
-    Factor chain;
-    chain.i = index - 1;
-    chain.j = index;
-    chain.T_i_j = motion;
-    chain.information =
-        Eigen::Vector3d(1 / (sxy * sxy), 1 / (sxy * sxy), 1 / (sth * sth)).asDiagonal();
-    chain.source = FactorSource::kLaser;
-    chain.cost.reset(Se2BetweenCost::Create(
-        ToVector(motion), Eigen::Vector3d(1 / sxy, 1 / sxy, 1 / sth).asDiagonal()));
-    chain.loss = robust_loss_;
-    AddGraphFactor(std::move(chain));
+  if (index > 0 && (options_.laser_chain_factors == "always" ||
+                    (options_.laser_chain_factors == "odometry_gaps" &&
+                     !options_.use_wheel_odometry))) {
+    AddChainFactor(index);
   }
   AttachPendingFactors();
   AddOdometryFactors();
@@ -399,6 +391,27 @@ void FactorGraphFusion::AttachPendingFactors() {
   }
 }
 
+void FactorGraphFusion::AddChainFactor(int j) {
+  const Node& prev = nodes_[j - 1];
+  const Pose2 motion = prev.T_map_base_rbpf.between(nodes_[j].T_map_base_rbpf);
+  const double dist = std::hypot(motion.x, motion.y);
+  const double sxy = options_.chain_sigma_xy_min + options_.chain_sigma_xy_per_m * dist;
+  const double sth = options_.chain_sigma_theta_min +
+                     options_.chain_sigma_theta_per_rad * std::fabs(motion.theta);
+  Factor chain;
+  chain.i = j - 1;
+  chain.j = j;
+  chain.T_i_j = motion;
+  chain.information =
+      Eigen::Vector3d(1 / (sxy * sxy), 1 / (sxy * sxy), 1 / (sth * sth)).asDiagonal();
+  chain.source = FactorSource::kLaser;
+  chain.cost.reset(Se2BetweenCost::Create(
+      ToVector(motion), Eigen::Vector3d(1 / sxy, 1 / sxy, 1 / sth).asDiagonal()));
+  chain.loss = robust_loss_;
+  ++counters_.chain_factors;
+  AddGraphFactor(std::move(chain));
+}
+
 Status FactorGraphFusion::AddOdometry(Utime utime, const Pose2& T_odom_base) {
   if (!options_.use_wheel_odometry) return Status::Ok();
   if (!Finite(T_odom_base)) {
@@ -443,12 +456,24 @@ bool FactorGraphFusion::OdometryAt(Utime t, Pose2* T_odom_base) const {
 
 void FactorGraphFusion::AddOdometryFactors() {
   if (!options_.use_wheel_odometry) return;
+  const bool chain_in_gaps = options_.laser_chain_factors == "odometry_gaps";
   while (next_odom_pair_ < num_nodes()) {
-    if (odometry_.empty() || odometry_.back().utime < nodes_[next_odom_pair_].utime) return;
-    const int j = next_odom_pair_++;
+    const int j = next_odom_pair_;
+    if (odometry_.empty() || odometry_.back().utime < nodes_[j].utime) {
+      // Not covered yet. Wait for late odometry, but not forever (no odometry at all, or a
+      // dead odometry driver): past the latency bound the pair is a gap.
+      const double behind = UtimeToSeconds(nodes_.back().utime - nodes_[j].utime);
+      if (behind <= options_.odom_max_latency_s) return;
+      ++next_odom_pair_;
+      ++counters_.odometry_gaps;
+      if (chain_in_gaps) AddChainFactor(j);
+      continue;
+    }
+    ++next_odom_pair_;
     Pose2 a, b;
     if (!OdometryAt(nodes_[j - 1].utime, &a) || !OdometryAt(nodes_[j].utime, &b)) {
       ++counters_.odometry_gaps;
+      if (chain_in_gaps) AddChainFactor(j);
       continue;
     }
     const Pose2 motion = a.between(b);
@@ -466,6 +491,7 @@ void FactorGraphFusion::AddOdometryFactors() {
     factor.source = FactorSource::kWheelOdometry;
     factor.cost.reset(Se2BetweenCost::Create(
         ToVector(motion), Eigen::Vector3d(1 / sxy, 1 / sxy, 1 / sth).asDiagonal()));
+    ++counters_.odometry_factors;
     AddGraphFactor(std::move(factor));
   }
 }

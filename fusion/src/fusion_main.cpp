@@ -177,6 +177,9 @@ class FusionProcess {
     status_.Set("pending_factors", fusion_.num_pending_factors());
     status_.Set("rejected", static_cast<double>(fusion_.counters().rejected_total()));
     status_.Set("full_solves", static_cast<double>(fusion_.counters().full_solves));
+    status_.Set("odometry_factors", static_cast<double>(fusion_.counters().odometry_factors));
+    status_.Set("odometry_gaps", static_cast<double>(fusion_.counters().odometry_gaps));
+    status_.Set("chain_factors", static_cast<double>(fusion_.counters().chain_factors));
     status_.Set("map_keyframes", map_.num_keyframes());
     if (u.ran) {
       status_.SetState(fusionloc::status_t::LEVEL_OK,

@@ -17,7 +17,8 @@ using fl::test::MakeRoundedSquareSim;
 FusionOptions TestOptions() {
   FusionOptions o;
   o.full_solve_every_n_nodes = 0;  // the tests decide when to solve
-  o.laser_chain_factors = false;   // tested on its own (the fixtures' RBPF poses drift)
+  o.laser_chain_factors = "never";  // tested on its own (the fixtures' RBPF poses drift)
+  o.use_wheel_odometry = false;     // likewise
   return o;
 }
 
@@ -274,6 +275,82 @@ TEST(FusionFactorGraph, WheelOdometryFactorsLinkNodes) {
   EXPECT_EQ(fusion.counters().rejected_odometry, 1);
 }
 
+// A corridor: the laser is degenerate along the axis, the RBPF slides (its poses advance 20 %
+// too little), the ICP keyframe factors carry (correctly) almost no information along x, and
+// the wheel odometry is right. With the default chain mode the odometry decides the
+// along-axis motion; chaining the RBPF poses as well would pull the result toward the slide.
+TEST(FusionFactorGraph, WheelOdometryOutweighsASlidingRbpfAlongACorridor) {
+  auto run = [](const std::string& chain_mode) {
+    FusionOptions o;
+    o.full_solve_every_n_nodes = 0;
+    o.laser_chain_factors = chain_mode;
+    FactorGraphFusion fusion(o);
+    const Utime t0 = 1000000;
+    for (int k = 0; k <= 200; ++k) {
+      const Utime t = t0 + k * 100000;
+      EXPECT_TRUE(fusion.AddOdometry(t, Pose2(0.05 * k, 0.0, 0.0)).ok());  // 0.5 m/s, exact
+      EXPECT_TRUE(fusion.AddLaserPose(t, Pose2(0.04 * k, 0.0, 0.0)).ok());  // slides
+      if (k > 0 && k % 10 == 0) {  // keyframe ICP factor: sure across, unsure along x
+        RelativePoseFactor f;
+        f.utime_i = t - 1000000;
+        f.utime_j = t;
+        f.T_i_j = Pose2(0.4, 0.0, 0.0).ToIsometry3();
+        f.information.setZero();
+        f.information(0, 0) = 1.0 / (2.0 * 2.0);  // sigma 2 m along the corridor
+        f.information(1, 1) = 1.0 / (0.01 * 0.01);
+        f.information(5, 5) = 1.0 / (0.002 * 0.002);
+        f.source = FactorSource::kLaser;
+        EXPECT_TRUE(fusion.AddFactor(f).ok());
+      }
+      fusion.Update();
+    }
+    fusion.FullSolve();
+    TrajectoryPoint last;
+    EXPECT_TRUE(fusion.Latest(&last));
+    return std::make_pair(std::fabs(last.T_map_base.x - 10.0), fusion.counters());
+  };
+  const auto [gaps_err, gaps_counters] = run("odometry_gaps");
+  EXPECT_EQ(gaps_counters.odometry_factors, 200);
+  EXPECT_EQ(gaps_counters.chain_factors, 0);
+  EXPECT_LT(gaps_err, 0.05);  // 10 m driven; the RBPF alone is 2 m short
+  const auto [always_err, always_counters] = run("always");
+  EXPECT_EQ(always_counters.chain_factors, 200);
+  EXPECT_GT(always_err, 0.5);  // odometry counted against an equally confident sliding chain
+}
+
+// Odometry that stops (driver died) or never comes: after odom_max_latency_s the node pairs
+// it does not cover get RBPF chain factors, so no node is left unconstrained.
+TEST(FusionFactorGraph, ChainFactorsFillOdometryGaps) {
+  FusionOptions o;
+  o.full_solve_every_n_nodes = 0;
+  o.odom_max_latency_s = 0.5;
+  FactorGraphFusion fusion(o);
+  const Utime t0 = 1000000;
+  for (int k = 0; k <= 100; ++k) {
+    const Utime t = t0 + k * 100000;
+    if (k <= 40) {
+      ASSERT_TRUE(fusion.AddOdometry(t, Pose2(0.05 * k, 0.0, 0.0)).ok());
+    }
+    ASSERT_TRUE(fusion.AddLaserPose(t, Pose2(0.05 * k, 0.0, 0.0)).ok());
+  }
+  const FusionCounters& c = fusion.counters();
+  EXPECT_EQ(c.odometry_factors, 40);  // pairs (0,1) .. (39,40)
+  // Pairs 41..100 lack odometry; those more than 0.5 s older than the newest node (41..94)
+  // are gaps now, the last 6 still wait for late odometry.
+  EXPECT_EQ(c.odometry_gaps, 54);
+  EXPECT_EQ(c.chain_factors, 54);
+  EXPECT_EQ(fusion.num_factors(), 1 + 40 + 54);
+  // With the default options and no odometry channel at all, every pair gets there too.
+  FactorGraphFusion no_odometry(o);
+  for (int k = 0; k <= 100; ++k) {
+    ASSERT_TRUE(no_odometry.AddLaserPose(t0 + k * 100000, Pose2(0.05 * k, 0.0, 0.0)).ok());
+  }
+  EXPECT_EQ(no_odometry.counters().chain_factors, 94);
+  // Chain mode "never" leaves the gaps to interpolation; unknown modes are refused.
+  o.laser_chain_factors = "sometimes";
+  EXPECT_NE(o.Validate().message().find("laser_chain_factors"), std::string::npos);
+}
+
 // Every bad input is rejected with an error and a counter, and the graph is unchanged.
 TEST(FusionFactorGraph, BadInputIsRejectedAndCountedWithoutCorruptingTheGraph) {
   FusionSimOptions so;
@@ -386,7 +463,7 @@ TEST(FusionFactorGraph, LaserChainFactorsConstrainEveryNode) {
   so.loop_closure = false;
   const FusionSimData d = MakeRoundedSquareSim(so);
   FusionOptions o = TestOptions();
-  o.laser_chain_factors = true;
+  o.laser_chain_factors = "always";
   FactorGraphFusion fusion(o);
   for (const auto& p : d.rbpf) ASSERT_TRUE(fusion.AddLaserPose(p.utime, p.T_map_base).ok());
   EXPECT_EQ(fusion.num_factors(), static_cast<int>(d.rbpf.size()));  // prior + chain
@@ -414,7 +491,7 @@ TEST(FusionFactorGraph, LaserChainFactorsConstrainEveryNode) {
 
 TEST(FusionFactorGraph, NewestNodeCovarianceAddsPriorAndChainNoise) {
   FusionOptions o = TestOptions();
-  o.laser_chain_factors = true;
+  o.laser_chain_factors = "always";
   o.robust_loss = "none";
   FactorGraphFusion fusion(o);
   ASSERT_TRUE(fusion.AddLaserPose(1000000, Pose2(1.0, 2.0, 0.3)).ok());

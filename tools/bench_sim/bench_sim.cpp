@@ -99,6 +99,11 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
     }
     out.truth.push_back(Stamp(f.utime, f.T_world_base));
     truth_by_time[f.utime] = f.T_world_base;
+    if (f.odometry) {
+      // As fl-fusion does with ODOMETRY (used only when the fusion's use_wheel_odometry is on).
+      const fl::Pose2 T_odom_base(f.odometry->x, f.odometry->y, f.odometry->theta);
+      if (!fusion.AddOdometry(f.odometry->utime, T_odom_base).ok()) ++out.rejected;
+    }
     if (f.laser && rbpf) {
       fl::rbpf::LaserScan scan;
       scan.utime = f.laser->utime;

@@ -36,9 +36,16 @@
 // changes the graph.
 //
 // LASER CHAIN: the RBPF publishes a scan-matched pose per scan but ICP factors only between
-// its keyframes; with laser_chain_factors every pair of consecutive RBPF poses also becomes a
-// between-factor (noise model chain_sigma_*, robust loss: the RBPF pose can jump when the
-// filter resamples or its graph corrects), so every node is constrained.
+// its keyframes, so a node pair between keyframes needs another factor. Wheel odometry is the
+// first choice: it is independent of the laser, and along a corridor (where scan matching is
+// degenerate and the RBPF slides) it is what keeps the along-axis motion right. A *chain*
+// factor from the pair of consecutive RBPF poses (noise model chain_sigma_*, robust loss: the
+// RBPF pose can jump when the filter resamples or its graph corrects) fills in only where
+// odometry does not (laser_chain_factors = "odometry_gaps", the default): every pair when
+// use_wheel_odometry is off, and pairs the odometry does not cover (a sample gap larger
+// than odom_max_gap_s, or odometry later than odom_max_latency_s behind the newest node).
+// "always" adds it to every pair (the RBPF pose already contains the odometry, so with
+// odometry factors as well the odometry counts twice), "never" to none.
 //
 // WHEEL ODOMETRY: integrated poses T_odom_base; for each pair of consecutive nodes the
 // odometry pose is interpolated at both node times and the relative motion becomes a
@@ -107,21 +114,22 @@ struct FusionOptions {
   double robust_loss_scale = 3.0;          // [sigma] whitened error where the loss bends
   double prior_sigma_xy = 0.001;           // [m] prior on the first node (gauge)
   double prior_sigma_theta = 0.001;        // [rad]
-  // RBPF pose chain: a between-factor from every pair of consecutive laser poses (the RBPF's
-  // scan-matched motion), so that every node is constrained even between RBPF keyframes.
-  bool laser_chain_factors = true;
+  // RBPF pose chain (between-factors from consecutive RBPF poses; see the file comment):
+  // "odometry_gaps" (node pairs that wheel odometry does not cover), "always" or "never".
+  std::string laser_chain_factors = "odometry_gaps";
   double chain_sigma_xy_min = 0.01;         // [m] per node pair
   double chain_sigma_xy_per_m = 0.05;       // [m/m]
   double chain_sigma_theta_min = 0.005;     // [rad]
   double chain_sigma_theta_per_rad = 0.05;  // [rad/rad]
-  bool use_wheel_odometry = false;          // add odometry between-factors (off: the RBPF already
-                                            // fuses the wheel odometry; on would count it twice)
+  bool use_wheel_odometry = true;           // odometry between-factors for consecutive nodes
   double odom_sigma_xy_min = 0.02;          // [m] odometry noise floor per node pair
   double odom_sigma_xy_per_m = 0.05;        // [m/m] odometry xy noise per metre travelled
   double odom_sigma_theta_min = 0.005;      // [rad] heading noise floor per node pair
   double odom_sigma_theta_per_rad = 0.05;   // [rad/rad] heading noise per radian turned
   double odom_sigma_theta_per_m = 0.01;     // [rad/m] heading noise per metre travelled
   double odom_max_gap_s = 0.5;              // [s] no odometry factor across a larger sample gap
+  double odom_max_latency_s = 0.5;          // [s] a node pair still without odometry when the
+                                            // newest node is this much newer is a gap
   int max_pending_factors = 1000;           // factors waiting for their laser node; oldest dropped
   bool compute_covariance = true;           // marginal covariance of the newest node per Update()
 
@@ -150,6 +158,7 @@ struct FusionOptions {
     a->Visit("odom_sigma_theta_per_rad", &odom_sigma_theta_per_rad);
     a->Visit("odom_sigma_theta_per_m", &odom_sigma_theta_per_m);
     a->Visit("odom_max_gap_s", &odom_max_gap_s);
+    a->Visit("odom_max_latency_s", &odom_max_latency_s);
     a->Visit("max_pending_factors", &max_pending_factors);
     a->Visit("compute_covariance", &compute_covariance);
   }
@@ -182,6 +191,8 @@ struct FusionCounters {
   int64_t dropped_pending_overflow = 0;  // pending factors dropped (max_pending_factors)
   int64_t rejected_odometry = 0;         // odometry sample out of order / non-finite
   int64_t odometry_gaps = 0;             // node pairs without odometry coverage
+  int64_t odometry_factors = 0;          // wheel-odometry between-factors added
+  int64_t chain_factors = 0;             // RBPF pose-chain factors added
   int64_t full_solves = 0;
   int64_t updates = 0;
   int64_t rejected_total() const {
@@ -295,6 +306,7 @@ class FactorGraphFusion {
   void AddGraphFactor(Factor factor);
   void AttachPendingFactors();
   void AddOdometryFactors();
+  void AddChainFactor(int j);  // between nodes j-1 and j, from their RBPF poses
   bool OdometryAt(Utime t, Pose2* T_odom_base) const;
   SolveSummary SolveWindow(int first_node);
   // Nodes (from `first` on) that no factor touches are placed by the RBPF's relative motion
