@@ -3,6 +3,8 @@
 #include <Eigen/Cholesky>
 #include <stdexcept>
 
+#include "fusionloc/common/solver_threads.hpp"
+
 namespace fl::rbpf {
 
 ceres::CostFunction* RelativePose2Cost::Create(const fl::Pose2& T_i_j,
@@ -45,6 +47,7 @@ double PoseGraph2D::Optimize(int max_iterations, bool* converged) {
   opts.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   opts.max_num_iterations = max_iterations;
   opts.num_threads = 1;
+  fl::ConfigureSparseSolverThreads(opts.num_threads);  // CHOLMOD's OpenMP teams: see header
   ceres::Solver::Summary summary;
   ceres::Solve(opts, &problem, &summary);
   for (auto& n : nodes_) n[2] = fl::WrapAngle(n[2]);
