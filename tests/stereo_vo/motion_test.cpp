@@ -1,5 +1,6 @@
-// Tests of the motion solvers: SVD (Arun/Umeyama), RANSAC, the Ceres refinement and its
-// covariance, the cost functors' Jacobians, and the covariance transport helpers.
+// Tests of the motion solvers: SVD (Arun/Umeyama), RANSAC, the refinement (analytic and Ceres)
+// and its covariance, the disparity offset estimation, the cost functors' Jacobians, and the
+// covariance transport helpers.
 #include "fusionloc/stereo_vo/motion.hpp"
 
 #include <ceres/gradient_checker.h>
@@ -130,6 +131,109 @@ TEST(StereoVoMotion, RefinementCovarianceIsConsistent) {
       EXPECT_GT(nees, 3.0);
     }
   }
+}
+
+// The analytic two-view bundle adjustment (default) and the Ceres reference give the same
+// motion and covariance on the same problem.
+TEST(StereoVoMotion, AnalyticBundleAdjustmentMatchesCeres) {
+  const Eigen::Isometry3d T = MakeMotion(0.01, 0.04, -0.02, 0.15, -0.05, 0.9);
+  const auto corr = MakeCorrespondences(Cam(), T, 120, 0, 0.4, 21);
+  std::vector<int> all(corr.size());
+  for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  const Eigen::Isometry3d T0 = T * MakeMotion(0.005, -0.004, 0.003, 0.03, 0.02, -0.04);
+  RefineOptions analytic, ceres_opts;
+  analytic.max_iterations = ceres_opts.max_iterations = 20;
+  ceres_opts.use_ceres = true;
+  std::vector<Eigen::Vector3d> pts_a, pts_c;
+  const RefineResult a = RefineMotion(Cam(), corr, all, T0, analytic, &pts_a);
+  const RefineResult c = RefineMotion(Cam(), corr, all, T0, ceres_opts, &pts_c);
+  ASSERT_TRUE(a.ok);
+  ASSERT_TRUE(c.ok);
+  // Same minimum up to the solvers' stopping tolerances (a wrong Jacobian would be far off).
+  EXPECT_LT(TransError(a.T_a_b, c.T_a_b), 2e-5);
+  EXPECT_LT(RotErrorDeg(a.T_a_b, c.T_a_b), 2e-4);
+  EXPECT_NEAR(a.final_cost, c.final_cost, 1e-5 * c.final_cost);
+  EXPECT_LT((a.covariance - c.covariance).norm(), 1e-2 * c.covariance.norm());
+  ASSERT_EQ(pts_a.size(), pts_c.size());
+  for (size_t i = 0; i < pts_a.size(); ++i) {
+    EXPECT_LT((pts_a[i] - pts_c[i]).norm(), 2e-4 * pts_c[i].z() * pts_c[i].z());  // ~ depth sd
+  }
+  EXPECT_FALSE(a.offset_estimated);
+  // The offset is only modelled by the analytic solver: the Ceres path refuses it.
+  OffsetPrior prior;
+  EXPECT_FALSE(RefineMotion(Cam(), corr, all, T0, ceres_opts, nullptr, &prior).ok);
+}
+
+// Correspondences whose measured disparities carry the rectification yaw offset
+// delta * OffsetBasis(u_right): far points appear farther (delta < 0), the motion too long.
+std::vector<StereoCorrespondence> WithOffset(const StereoCamera& cam,
+                                             std::vector<StereoCorrespondence> corr, double delta) {
+  for (auto& c : corr) {
+    // measured u_right = true u_right - delta g (so u_left - u_right = d_true + delta g).
+    c.obs_a(2) -= delta * OffsetBasis(cam, c.obs_a(2));
+    c.obs_b(2) -= delta * OffsetBasis(cam, c.obs_b(2));
+    c.p_a = cam.Triangulate(c.obs_a(0), c.obs_a(1), c.obs_a(0) - c.obs_a(2));
+    c.p_b = cam.Triangulate(c.obs_b(0), c.obs_b(1), c.obs_b(0) - c.obs_b(2));
+  }
+  return corr;
+}
+
+TEST(StereoVoMotion, BundleAdjustmentEstimatesTheDisparityOffset) {
+  // KITTI-like rig and depths (4..40 m), forward motion of 1 m.
+  const StereoCamera cam{720.0, 720.0, 620.0, 187.0, 0.54};
+  const Eigen::Isometry3d T = MakeMotion(0.0, 0.01, 0.0, 0.02, 0.0, 1.0);
+  const double delta = -0.3;  // [px]
+  double scale_without = 0, scale_with = 0, offset_sum = 0, z_sum = 0;
+  const int runs = 20;
+  for (int k = 0; k < runs; ++k) {
+    auto corr = MakeCorrespondences(cam, T, 200, 0, 0.2, 300 + k);
+    // Widen to KITTI's field of view (the helper draws x in [-8, 8] m).
+    corr = WithOffset(cam, std::move(corr), delta);
+    std::vector<int> all(corr.size());
+    for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+    const RefineResult plain = RefineMotion(cam, corr, all, T, RefineOptions());
+    OffsetPrior prior;
+    prior.variance_px2 = 1.0;
+    prior.sigma_px = 0.2;
+    const RefineResult est = RefineMotion(cam, corr, all, T, RefineOptions(), nullptr, &prior);
+    ASSERT_TRUE(plain.ok);
+    ASSERT_TRUE(est.ok);
+    ASSERT_TRUE(est.offset_estimated);
+    EXPECT_GT(est.offset_data_information, 1.0 / (0.2 * 0.2)) << "offset observable here";
+    scale_without += plain.T_a_b.translation().norm() / T.translation().norm() / runs;
+    scale_with += est.T_a_b.translation().norm() / T.translation().norm() / runs;
+    offset_sum += est.offset_px / runs;
+    z_sum += (est.offset_px - delta) / std::sqrt(est.offset_variance_px2) / runs;
+  }
+  EXPECT_GT(scale_without, 1.005) << "the offset makes the motion too long";
+  EXPECT_NEAR(scale_with, 1.0, 0.002);
+  EXPECT_NEAR(offset_sum, delta, 0.03);
+  EXPECT_LT(std::abs(z_sum), 1.0) << "mean normalised offset error";
+}
+
+TEST(StereoVoMotion, OffsetIsUnobservableWithoutTranslation) {
+  // Pure rotation: every depth explains the observations, so the data say (almost) nothing
+  // about the offset and the estimate stays at the prior (0); with 1 m of forward motion the
+  // same scene determines it.
+  const StereoCamera cam{720.0, 720.0, 620.0, 187.0, 0.54};
+  OffsetPrior prior;
+  prior.variance_px2 = 0.01;
+  prior.sigma_px = 0.2;
+  double information[2] = {0, 0};
+  for (int moving = 0; moving < 2; ++moving) {
+    const Eigen::Isometry3d T = MakeMotion(0.0, 0.03, 0.0, 0.0, 0.0, moving ? 1.0 : 0.0);
+    const auto corr = WithOffset(cam, MakeCorrespondences(cam, T, 200, 0, 0.0, 5), -0.3);
+    std::vector<int> all(corr.size());
+    for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+    const RefineResult est = RefineMotion(cam, corr, all, T, RefineOptions(), nullptr, &prior);
+    ASSERT_TRUE(est.ok);
+    information[moving] = est.offset_data_information;
+    if (!moving) {
+      EXPECT_LT(std::abs(est.offset_px), 0.02);
+      EXPECT_LT(est.T_a_b.translation().norm(), 1e-3);
+    }
+  }
+  EXPECT_LT(information[0], 0.01 * information[1]) << "[1/px^2]";
 }
 
 TEST(StereoVoMotion, CostFunctorsHaveCorrectJacobians) {

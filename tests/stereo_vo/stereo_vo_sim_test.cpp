@@ -1,6 +1,9 @@
-// A short run of the simulator (paper world, 640x480 stereo at 2 Hz, noisy pixels) through the
-// stereo VO: the estimated path must drift less than 1% of the distance travelled.
+// Short runs of the simulator (paper world, 640x480 stereo, noisy pixels) through the stereo
+// VO: the estimated path must drift less than 1% of the distance travelled, and an injected
+// disparity offset (right camera yaw) must be estimated.
 #include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
 
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/sim/simulator.hpp"
@@ -64,6 +67,74 @@ TEST(StereoVoSim, ShortSimulatedSequenceDriftsLessThanOnePercent) {
             << 100.0 * end_error / path << " %), rotation error " << yaw_error_deg << " deg\n";
   EXPECT_LT(end_error / path, 0.01);
   EXPECT_LT(yaw_error_deg, 2.0);
+}
+
+// The same route with the right images shifted as by a small yaw of the right camera (measured
+// disparity = true + delta (1 + x^2), delta = -0.4 px): the VO's online estimate converges to
+// delta and the path keeps its scale; with the estimation off the path comes out too long.
+TEST(StereoVoSim, EstimatesAnInjectedDisparityOffset) {
+  const double delta = -0.4;  // [px]
+  double scale[2] = {0, 0}, final_offset = 0, final_sd = 0;
+  for (int estimate = 0; estimate < 2; ++estimate) {
+    fl::sim::SimOptions sim_opts;
+    sim_opts.duration_s = 5.0;
+    sim_opts.camera.rate_hz = 5.0;
+    sim_opts.laser.enabled = false;
+    fl::sim::Simulator sim(sim_opts);
+    StereoVoOptions opts;
+    opts.estimate_disparity_offset = estimate == 1;
+    std::unique_ptr<StereoVo> vo;
+    cv::Mat map_x, map_y;
+    fl::sim::SimFrame frame;
+    Eigen::Isometry3d T_gt_prev = Eigen::Isometry3d::Identity();
+    Eigen::Isometry3d T_vo_prev = Eigen::Isometry3d::Identity();
+    double gt_path = 0, vo_path = 0;
+    int frames = 0;
+    while (sim.Step(&frame)) {
+      if (frame.calibration && !vo) {
+        const StereoCalibration cal = CalibrationFromLcm(*frame.calibration);
+        vo = std::make_unique<StereoVo>(opts, cal);
+        // new_right(u, v) = right(u + delta g(u)): features move to u - delta g.
+        map_x.create(cal.height, cal.width, CV_32F);
+        map_y.create(cal.height, cal.width, CV_32F);
+        for (int v = 0; v < cal.height; ++v) {
+          for (int u = 0; u < cal.width; ++u) {
+            map_x.at<float>(v, u) = static_cast<float>(u + delta * OffsetBasis(cal.camera(), u));
+            map_y.at<float>(v, u) = static_cast<float>(v);
+          }
+        }
+      }
+      if (!frame.stereo || !vo) continue;
+      cv::Mat left, right, shifted;
+      ASSERT_TRUE(StereoImagesToGray(*frame.stereo, &left, &right).ok());
+      cv::remap(right, shifted, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      const StereoVoResult r = vo->AddStereoFrame(frame.stereo->utime, left, shifted);
+      const Eigen::Isometry3d T_gt = frame.T_world_base.ToIsometry3();
+      if (frames > 0) {
+        ASSERT_EQ(r.state, TrackingState::kTracked) << "frame " << frames << ": " << r.message;
+        gt_path += (T_gt.translation() - T_gt_prev.translation()).norm();
+        vo_path += (r.T_world_base.translation() - T_vo_prev.translation()).norm();
+      }
+      T_gt_prev = T_gt;
+      T_vo_prev = r.T_world_base;
+      final_offset = r.stats.disparity_offset_px;
+      final_sd = r.stats.disparity_offset_sd_px;
+      ++frames;
+    }
+    ASSERT_GT(frames, 20);
+    ASSERT_GT(gt_path, 2.0);
+    scale[estimate] = vo_path / gt_path;
+    if (estimate == 0) {
+      EXPECT_EQ(final_offset, 0.0) << "estimation off: the offset stays 0";
+    }
+  }
+  std::cout << "path scale without / with offset estimation: " << scale[0] << " / " << scale[1]
+            << "; estimated offset " << final_offset << " +- " << final_sd << " px (injected "
+            << delta << ")\n";
+  EXPECT_GT(scale[0], 1.005) << "the injected offset must lengthen the path";
+  EXPECT_LT(std::abs(scale[1] - 1.0), 0.5 * std::abs(scale[0] - 1.0));
+  EXPECT_NEAR(final_offset, delta, 0.1);
+  EXPECT_LT(final_sd, 0.1);
 }
 
 }  // namespace

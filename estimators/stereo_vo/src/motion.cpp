@@ -5,6 +5,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 
 #include "fusionloc/stereo_vo/reprojection_cost.hpp"
@@ -233,11 +234,279 @@ RefineResult RefineJoint(const StereoCamera& cam, const std::vector<StereoCorres
   return result;
 }
 
+// Two-view bundle adjustment with analytic Jacobians, Levenberg-Marquardt on the reduced
+// (Schur complement) system. Unknowns: the pose perturbation y = [rho; phi] of
+// T_a_b = T Exp(y) (ApplyDelta), optionally the disparity offset increment c, and every point
+// p_a (frame a). Residuals per point (pixels), Huber-weighted per 3-vector as Ceres does:
+//   A: pi(p_a) - obs_a            B: pi(p_b) - obs_b,   p_b = R(phi)^T (R^T (p_a - t) - rho)
+// with pi(p) = (fx x/z + cx, fy y/z + cy, fx (x - b)/z + cx) and c g subtracted from u_right's
+// observation (residual_u_right = pi_2 - obs_2 - c g, g = OffsetBasis(obs_2)). At y = 0, with
+// q = R^T (p_a - t):
+//   d p_b / d rho = -I,  d p_b / d phi = [q]x,  d p_b / d p_a = R^T,  d r_u_right / d c = -g,
+//   d pi / d p = [fx/z 0 -fx x/z^2; 0 fy/z -fy y/z^2; fx/z 0 -fx (x-b)/z^2].
+// Each iteration eliminates the points (3x3 blocks), solves the 6- or 7-dimensional reduced
+// system, back-substitutes the points, and accepts the step if the robust cost decreased.
+class TwoViewBa {
+ public:
+  using Mat3 = Eigen::Matrix3d;
+  using Vec3 = Eigen::Vector3d;
+  static constexpr int kMaxGlobal = 8;  // 6 pose + offset, padded (vectorisation)
+  using MatG = Eigen::Matrix<double, kMaxGlobal, kMaxGlobal>;
+  using VecG = Eigen::Matrix<double, kMaxGlobal, 1>;
+  using MatG3 = Eigen::Matrix<double, kMaxGlobal, 3>;
+
+  TwoViewBa(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
+            const std::vector<int>& inliers, double huber_px, double prior_weight)
+      : cam_(cam), huber_(huber_px), prior_weight_(prior_weight), ng_(prior_weight > 0 ? 7 : 6) {
+    obs_a_.reserve(inliers.size());
+    obs_b_.reserve(inliers.size());
+    pts_.reserve(inliers.size());
+    for (int i : inliers) {
+      const StereoCorrespondence& c = corr[static_cast<size_t>(i)];
+      obs_a_.push_back(c.obs_a);
+      obs_b_.push_back(c.obs_b);
+      pts_.push_back(c.p_a);
+    }
+    hpp_.resize(pts_.size());
+    hgp_.resize(pts_.size());
+    gp_.resize(pts_.size());
+  }
+
+  int size() const { return static_cast<int>(pts_.size()); }
+  int num_global() const { return ng_; }
+  const std::vector<Vec3>& points() const { return pts_; }
+
+  // Robust cost 1/2 sum rho(|r|^2) (+ the prior) at (T, c, points); +inf if a point is behind
+  // a camera.
+  double Cost(const Eigen::Isometry3d& T, double c, const std::vector<Vec3>& pts) const {
+    const Mat3 Rt = T.linear().transpose();
+    double cost = 0;
+    Vec3 r;
+    for (size_t k = 0; k < pts.size(); ++k) {
+      if (!Residual(pts[k], obs_a_[k], c, &r)) return kInf;
+      cost += Rho(r.squaredNorm());
+      if (!Residual(Rt * (pts[k] - T.translation()), obs_b_[k], c, &r)) return kInf;
+      cost += Rho(r.squaredNorm());
+    }
+    return 0.5 * cost + 0.5 * prior_weight_ * c * c;
+  }
+
+  // Builds the reduced system at (T, c, pts_): S y = -s (S = H_gg - sum H_gp H_pp^-1 H_pg).
+  // robust = false: plain Gauss-Newton Hessian (for the covariance). lambda: LM damping.
+  // Also accumulates sum of min(r^2, clip) and sum r^2 over residual components.
+  bool Build(const Eigen::Isometry3d& T, double c, bool robust, double lambda, MatG* S, VecG* s,
+             double* clipped_sq = nullptr, double* plain_sq = nullptr) {
+    const Mat3 Rt = T.linear().transpose();
+    MatG Hgg = MatG::Zero();
+    VecG gg = VecG::Zero();
+    const double clip = 9.0 * huber_ * huber_;
+    double csq = 0, psq = 0;
+    for (size_t k = 0; k < pts_.size(); ++k) {
+      const Vec3& p = pts_[k];
+      const Vec3 q = Rt * (p - T.translation());
+      Vec3 ra, rb;
+      if (!Residual(p, obs_a_[k], c, &ra) || !Residual(q, obs_b_[k], c, &rb)) return false;
+      for (int i = 0; i < 3; ++i) {
+        csq += std::min(ra(i) * ra(i), clip) + std::min(rb(i) * rb(i), clip);
+        psq += ra(i) * ra(i) + rb(i) * rb(i);
+      }
+      const double wa = robust ? Weight(ra.squaredNorm()) : 1.0;
+      const double wb = robust ? Weight(rb.squaredNorm()) : 1.0;
+      const Mat3 Ja = ProjectionJacobian(p);  // d r_a / d p
+      const Mat3 Jq = ProjectionJacobian(q);
+      const Mat3 Jb = Jq * Rt;  // d r_b / d p
+      // d r_b / d [rho phi]: Jq [-I, [q]x]; d r / d c = (0, 0, -1) in both views.
+      Eigen::Matrix<double, 3, kMaxGlobal> Jg = Eigen::Matrix<double, 3, kMaxGlobal>::Zero();
+      Jg.block<3, 3>(0, 0) = -Jq;
+      Jg.block<3, 3>(0, 3) = Jq * Skew(q);
+      if (ng_ == 7) Jg(2, 6) = -Basis(obs_b_[k]);
+      Mat3 Hpp = wa * Ja.transpose() * Ja + wb * Jb.transpose() * Jb;
+      Vec3 gp = wa * Ja.transpose() * ra + wb * Jb.transpose() * rb;
+      MatG3 Hgp = wb * Jg.transpose() * Jb;
+      Hgg += wb * Jg.transpose() * Jg;
+      gg += wb * Jg.transpose() * rb;
+      if (ng_ == 7) {  // view a's u_right also depends on c
+        const double ga = Basis(obs_a_[k]);
+        Hgg(6, 6) += wa * ga * ga;
+        gg(6) += -wa * ga * ra(2);
+        Hgp.row(6) += -wa * ga * Ja.row(2);
+      }
+      if (lambda > 0) Hpp.diagonal() *= (1.0 + lambda);
+      hpp_[k] = Hpp.inverse();
+      if (!hpp_[k].allFinite()) return false;
+      hgp_[k] = Hgp;
+      gp_[k] = gp;
+      Hgg -= Hgp * hpp_[k] * Hgp.transpose();
+      gg -= Hgp * (hpp_[k] * gp);
+    }
+    if (ng_ == 7) {
+      Hgg(6, 6) += prior_weight_;
+      gg(6) += prior_weight_ * c;
+    }
+    if (lambda > 0) Hgg.diagonal().head(ng_) *= (1.0 + lambda);
+    if (ng_ < kMaxGlobal) {  // unused rows/cols: identity so the 7x7 solve stays regular
+      for (int i = ng_; i < kMaxGlobal; ++i) Hgg(i, i) = 1.0;
+    }
+    *S = Hgg;
+    *s = gg;
+    if (clipped_sq != nullptr) *clipped_sq = csq;
+    if (plain_sq != nullptr) *plain_sq = psq;
+    return true;
+  }
+
+  // Step for the points given the global step dy (after Build).
+  void PointSteps(const VecG& dy, std::vector<Vec3>* dp) const {
+    dp->resize(pts_.size());
+    for (size_t k = 0; k < pts_.size(); ++k) {
+      (*dp)[k] = -hpp_[k] * (gp_[k] + hgp_[k].transpose() * dy);
+    }
+  }
+  std::vector<Vec3>& mutable_points() { return pts_; }
+
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
+
+ private:
+  bool Residual(const Vec3& p, const Vec3& obs, double c, Vec3* r) const {
+    if (!(p.z() > 1e-6)) return false;
+    const double iz = 1.0 / p.z();
+    (*r)(0) = cam_.fx * p.x() * iz + cam_.cx - obs(0);
+    (*r)(1) = cam_.fy * p.y() * iz + cam_.cy - obs(1);
+    (*r)(2) = cam_.fx * (p.x() - cam_.baseline) * iz + cam_.cx - obs(2) - c * Basis(obs);
+    return true;
+  }
+  // How the offset at the image centre scales at this observation (OffsetBasis).
+  double Basis(const Vec3& obs) const { return OffsetBasis(cam_, obs(2)); }
+  Mat3 ProjectionJacobian(const Vec3& p) const {
+    const double iz = 1.0 / p.z(), iz2 = iz * iz;
+    Mat3 J;
+    J << cam_.fx * iz, 0, -cam_.fx * p.x() * iz2,  //
+        0, cam_.fy * iz, -cam_.fy * p.y() * iz2,   //
+        cam_.fx * iz, 0, -cam_.fx * (p.x() - cam_.baseline) * iz2;
+    return J;
+  }
+  // Huber: rho(s) = s (s <= h^2), 2 h sqrt(s) - h^2 otherwise; IRLS weight rho'(s).
+  double Rho(double s) const {
+    const double h2 = huber_ * huber_;
+    return s <= h2 ? s : 2.0 * huber_ * std::sqrt(s) - h2;
+  }
+  double Weight(double s) const {
+    const double h2 = huber_ * huber_;
+    return s <= h2 ? 1.0 : huber_ / std::sqrt(s);
+  }
+
+  StereoCamera cam_;
+  double huber_, prior_weight_;
+  int ng_;
+  std::vector<Vec3> obs_a_, obs_b_, pts_;
+  std::vector<Mat3> hpp_;
+  std::vector<MatG3, Eigen::aligned_allocator<MatG3>> hgp_;
+  std::vector<Vec3> gp_;
+};
+
+RefineResult RefineAnalytic(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
+                            const std::vector<int>& inliers, const Eigen::Isometry3d& T0,
+                            const RefineOptions& options, std::vector<Eigen::Vector3d>* points_a,
+                            const OffsetPrior* offset) {
+  RefineResult result;
+  result.T_a_b = T0;
+  if (inliers.size() < 3) return result;
+  const double prior_weight =
+      offset != nullptr ? offset->sigma_px * offset->sigma_px / offset->variance_px2 : 0.0;
+  TwoViewBa ba(cam, corr, inliers, options.huber_px, prior_weight);
+  Eigen::Isometry3d T = T0;
+  double c = 0;
+  double cost = ba.Cost(T, c, ba.points());
+  if (!std::isfinite(cost)) return result;
+  result.initial_cost = cost;
+  double lambda = 1e-4;
+  TwoViewBa::MatG S;
+  TwoViewBa::VecG s;
+  std::vector<Eigen::Vector3d> dp, trial;
+  const int ng = ba.num_global();
+  int it = 0;
+  for (int attempts = 0; it < options.max_iterations && attempts < 3 * options.max_iterations;
+       ++attempts) {
+    if (!ba.Build(T, c, true, lambda, &S, &s)) return result;
+    const TwoViewBa::VecG dy = -S.ldlt().solve(s);
+    if (!dy.allFinite()) return result;
+    ba.PointSteps(dy, &dp);
+    trial = ba.points();
+    for (size_t k = 0; k < trial.size(); ++k) trial[k] += dp[k];
+    double d6[6];
+    for (int i = 0; i < 6; ++i) d6[i] = dy(i);
+    const Eigen::Isometry3d T_new = ApplyDelta(T, d6);
+    const double c_new = ng == 7 ? c + dy(6) : 0.0;
+    const double new_cost = ba.Cost(T_new, c_new, trial);
+    if (new_cost < cost) {
+      ++it;
+      const double decrease = (cost - new_cost) / std::max(cost, 1e-12);
+      T = T_new;
+      c = c_new;
+      ba.mutable_points().swap(trial);
+      cost = new_cost;
+      lambda = std::max(1e-9, lambda / 5.0);
+      if (decrease < 1e-7 || dy.head(ng).norm() < 1e-10) break;
+    } else {
+      lambda *= 10.0;
+      if (lambda > 1e6) break;
+    }
+  }
+  result.iterations = it;
+  result.final_cost = cost;
+  result.T_a_b = T;
+
+  // Covariance: sigma^2 (reduced Gauss-Newton Hessian)^-1 at the solution, no robust weights,
+  // sigma^2 from the residuals with the Huber width bounding the outliers' influence.
+  double clipped_sq = 0, plain_sq = 0;
+  if (!ba.Build(T, c, false, 0.0, &S, &s, &clipped_sq, &plain_sq)) return result;
+  const double n = static_cast<double>(ba.size());
+  const double dof = std::max(1.0, 3.0 * n - 6.0);
+  const double sigma2 = std::max(options.min_sigma_px * options.min_sigma_px, clipped_sq / dof);
+  result.rms_px = std::sqrt(plain_sq / (6.0 * n));
+  result.sigma_px = std::sqrt(sigma2);
+  S = 0.5 * (S + S.transpose());
+  Eigen::FullPivLU<TwoViewBa::MatG> lu(S);
+  if (!lu.isInvertible()) return result;
+  const TwoViewBa::MatG Sinv = lu.inverse();
+  // Pose covariance conditional on the offset (its 6x6 block of the reduced Hessian), as for
+  // any calibration parameter: the offset's error is shared by all frames (systematic), so
+  // marginalising it into every factor would count it as independent per factor, and in a
+  // scene at a single depth it is confounded with the scale (a fronto-parallel plane).
+  const Eigen::Matrix<double, 6, 6> S66 = S.topLeftCorner<6, 6>();
+  Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu6(S66);
+  if (!lu6.isInvertible()) return result;
+  result.covariance = options.covariance_scale * sigma2 * lu6.inverse();
+  result.covariance = 0.5 * (result.covariance + result.covariance.transpose());
+  if (ng == 7) {
+    result.offset_estimated = true;
+    result.offset_px = c;
+    result.offset_variance_px2 = sigma2 * Sinv(6, 6);
+    // Information from the data alone: 1 / Sinv(6,6) is the Schur complement of c, which is
+    // the data's part plus the prior weight (unit-pixel scale); divide by sigma^2 for 1/px^2.
+    result.offset_data_information = std::max(0.0, 1.0 / Sinv(6, 6) - prior_weight) / sigma2;
+  }
+  result.ok = result.covariance.allFinite() && result.T_a_b.matrix().allFinite() &&
+              result.covariance.diagonal().minCoeff() > 0 && std::isfinite(c);
+  if (points_a != nullptr) *points_a = ba.points();
+  return result;
+}
+
 }  // namespace
 
 RefineResult RefineMotion(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
                           const std::vector<int>& inliers, const Eigen::Isometry3d& T_a_b_initial,
-                          const RefineOptions& options, std::vector<Eigen::Vector3d>* points_a) {
+                          const RefineOptions& options, std::vector<Eigen::Vector3d>* points_a,
+                          const OffsetPrior* offset) {
+  if (options.optimize_points && !options.use_ceres) {
+    return RefineAnalytic(cam, corr, inliers, T_a_b_initial, options, points_a, offset);
+  }
+  if (offset != nullptr) {
+    // Only the analytic two-view bundle adjustment models the offset (Validate rejects the
+    // combination in StereoVoOptions); refuse rather than silently ignore it.
+    RefineResult refused;
+    refused.T_a_b = T_a_b_initial;
+    return refused;
+  }
   if (options.optimize_points) {
     return RefineJoint(cam, corr, inliers, T_a_b_initial, options, points_a);
   }

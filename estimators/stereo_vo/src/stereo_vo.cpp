@@ -1,5 +1,6 @@
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
@@ -112,6 +113,20 @@ fl::Status StereoVoOptions::Validate() const {
   if (min_features < 3 || min_quads < 3) {
     return fl::Status::Error("min_features and min_quads must be >= 3");
   }
+  if (estimate_disparity_offset &&
+      (!use_refinement || !refine.optimize_points || refine.use_ceres)) {
+    return fl::Status::Error(
+        "estimate_disparity_offset needs the analytic two-view bundle adjustment: set "
+        "use_refinement true, refine.optimize_points true and refine.use_ceres false, or "
+        "estimate_disparity_offset false");
+  }
+  if (!(std::isfinite(disparity_offset_initial_px) && disparity_offset_initial_sd_px > 0 &&
+        disparity_offset_drift_px >= 0 && disparity_offset_max_px > 0 &&
+        std::abs(disparity_offset_initial_px) < disparity_offset_max_px)) {
+    return fl::Status::Error(
+        "disparity offset: need disparity_offset_initial_sd_px > 0, disparity_offset_drift_px >= "
+        "0 and |disparity_offset_initial_px| < disparity_offset_max_px");
+  }
   if (!(max_speed_mps > 0 && max_gap_s > 0)) {
     return fl::Status::Error("max_speed_mps and max_gap_s must be > 0");
   }
@@ -138,6 +153,9 @@ StereoVo::StereoVo(const StereoVoOptions& options, const StereoCalibration& cali
   }
   if (auto s = calibration.Validate(); !s.ok()) throw std::invalid_argument(s.message());
   T_world_camera_ = calibration_.T_base_camera;
+  offset_px_ = options_.disparity_offset_initial_px;
+  offset_var_px2_ =
+      options_.disparity_offset_initial_sd_px * options_.disparity_offset_initial_sd_px;
 }
 
 StereoVo::~StereoVo() = default;
@@ -194,6 +212,8 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
     result.pose_valid = initialized_;
     result.T_world_camera = T_world_camera_;
     result.T_world_base = T_world_camera_ * T_camera_base;
+    result.stats.disparity_offset_px = offset_px_;
+    result.stats.disparity_offset_sd_px = std::sqrt(offset_var_px2_);
     result.stats.ms_total = NowMs() - t_start;
   };
   auto reject = [&](TrackingState state, const std::string& why) {
@@ -284,7 +304,8 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
       const int j = f->stereo[static_cast<size_t>(i)];
       if (j < 0) continue;
       const cv::Point2f pl = f->fl.keypoints[static_cast<size_t>(i)].pt;
-      const double d = pl.x - f->fr.keypoints[static_cast<size_t>(j)].pt.x;
+      const double d =
+          pl.x - CorrectRightX(camera_, f->right_x[static_cast<size_t>(i)], offset_px_);
       if (!(d > 0)) continue;
       result.keyframe_points.push_back(camera_.Triangulate(pl.x, pl.y, d).cast<float>());
       result.keyframe_intensities.push_back(f->left.at<uint8_t>(cvRound(pl.y), cvRound(pl.x)) /
@@ -404,8 +425,11 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
     for (size_t k = 0; k < quads.size(); ++k) {
       const cv::Point2f la = prev.fl.keypoints[static_cast<size_t>(quads[k].left_a)].pt;
       const cv::Point2f lb = cur->fl.keypoints[static_cast<size_t>(quads[k].left_b)].pt;
-      const float ra_x = prev.right_x[static_cast<size_t>(quads[k].left_a)];
-      const float rb_x = cur->right_x[static_cast<size_t>(quads[k].left_b)];
+      // Right x corrected by the disparity offset estimate (yaw of the right camera).
+      const double ra_x =
+          CorrectRightX(camera_, prev.right_x[static_cast<size_t>(quads[k].left_a)], offset_px_);
+      const double rb_x =
+          CorrectRightX(camera_, cur->right_x[static_cast<size_t>(quads[k].left_b)], offset_px_);
       const double da = la.x - ra_x, db = lb.x - rb_x;
       if (!(da > 0 && db > 0)) continue;
       StereoCorrespondence c;
@@ -457,9 +481,24 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
   Eigen::Isometry3d T_a_b = ransac.T_a_b;
   std::vector<int> inliers = ransac.inliers;
   Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Identity() * 1e-2;
+  // Disparity offset prior: the filter's prediction (random walk since its last update). The
+  // prior's variance is halved because every frame's observations enter two frame pairs.
+  constexpr double kReuse = 0.5;
+  double offset_pred_var = offset_var_px2_;
+  if (offset_utime_ >= 0) {
+    offset_pred_var += options_.disparity_offset_drift_px * options_.disparity_offset_drift_px *
+                       static_cast<double>(utime - offset_utime_) * 1e-6;
+  }
+  OffsetPrior offset_prior;
+  offset_prior.variance_px2 = kReuse * offset_pred_var;
+  offset_prior.sigma_px = pixel_sigma_px_;
+  RefineResult offset_result;
   if (options_.use_refinement) {
     for (int round = 0; round < options_.refine_rounds; ++round) {
-      const RefineResult refined = RefineMotion(camera_, corr, inliers, T_a_b, options_.refine);
+      const RefineResult refined =
+          RefineMotion(camera_, corr, inliers, T_a_b, options_.refine, nullptr,
+                       options_.estimate_disparity_offset ? &offset_prior : nullptr);
+      offset_result = refined;
       if (!refined.ok) {
         result.stats.ms_motion = NowMs() - t0;
         return reject(TrackingState::kNotTracked, "motion refinement failed (degenerate geometry)");
@@ -494,7 +533,26 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
                                                   std::to_string(options_.max_speed_mps) + ")");
   }
 
-  // ---- accept: pose chain, tracks, keyframes ----
+  // ---- accept: disparity offset filter, pose chain, tracks, keyframes ----
+  if (offset_result.ok) {
+    pixel_sigma_px_ = std::clamp(offset_result.sigma_px, 0.1, 2.0);
+  }
+  if (offset_result.ok && offset_result.offset_estimated) {
+    // Kalman update with the data's information counted kReuse times (see above).
+    offset_px_ += offset_result.offset_px;
+    offset_var_px2_ =
+        1.0 / (1.0 / offset_pred_var + kReuse * offset_result.offset_data_information);
+    offset_utime_ = utime;
+    if (std::abs(offset_px_) > options_.disparity_offset_max_px) {
+      result.message = "disparity offset estimate " + std::to_string(offset_px_) +
+                       " px exceeds disparity_offset_max_px " +
+                       std::to_string(options_.disparity_offset_max_px) +
+                       ": reset to the initial value; check the stereo calibration";
+      offset_px_ = options_.disparity_offset_initial_px;
+      offset_var_px2_ =
+          options_.disparity_offset_initial_sd_px * options_.disparity_offset_initial_sd_px;
+    }
+  }
   T_world_camera_ = T_world_camera_ * T_a_b;
   T_prev_velocity_ = T_a_b;
   velocity_dt_s_ = dt_s;
@@ -536,6 +594,7 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
   std::ostringstream msg;
   msg << "tracked: " << result.stats.inliers << "/" << corr.size() << " inliers, rms "
       << result.stats.reprojection_rms_px << " px";
+  if (!result.message.empty()) msg << "; " << result.message;
   result.message = msg.str();
   last_good_ = std::move(cur);
   fill_pose();

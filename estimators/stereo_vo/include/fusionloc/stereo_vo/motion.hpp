@@ -101,6 +101,10 @@ struct RefineOptions {
   // true: two-view bundle adjustment (pose and points, unbiased); false: points fixed at
   // their triangulation, reprojected both ways (faster, but the motion comes out too long).
   bool optimize_points = true;
+  // Two-view bundle adjustment solver: false = the analytic Schur-complement
+  // Levenberg-Marquardt below (fast; can estimate the disparity offset); true = Ceres with the
+  // autodiff functors of reprojection_cost.hpp (reference; no disparity offset).
+  bool use_ceres = false;
   template <class A>
   void Serialize(A* a) {
     a->Visit("max_iterations", &max_iterations);
@@ -108,7 +112,35 @@ struct RefineOptions {
     a->Visit("min_sigma_px", &min_sigma_px);
     a->Visit("covariance_scale", &covariance_scale);
     a->Visit("optimize_points", &optimize_points);
+    a->Visit("use_ceres", &use_ceres);
   }
+};
+
+// Self-calibration of the stereo rectification's residual yaw. If the rectified right camera
+// is yawed by a small angle psi relative to the left (calibration error or mechanical drift),
+// every right image point moves horizontally by f psi (1 + x^2), x = (u_right - cx) / fx, so
+// the measured disparity is d_true + delta g(u_right) with delta = -f psi the offset at the
+// image centre [px] and g = OffsetBasis. Far points are hit hardest (relative depth error
+// -delta / d): with delta < 0 the estimated motion comes out too long (docs/STEREO_VO.md: about
+// -0.3 px on the KITTI drive, +1.5 % path length). A constant offset (right principal point
+// error) fits that drive clearly worse than the yaw model.
+// The caller passes observations whose u_right is already corrected by its current estimate
+// (CorrectRightX) and this prior; the refinement then also estimates the remaining increment
+// c of delta, shared by all points:
+//   u_right predicted = fx (x - b) / z + cx, residual = predicted - (u_right_obs + c g).
+// The prior adds (sigma_px^2 / variance_px2) c^2 to the cost (whose residuals are in pixels).
+inline double OffsetBasis(const StereoCamera& cam, double u_right) {
+  const double x = (u_right - cam.cx) / cam.fx;
+  return 1.0 + x * x;
+}
+// Right image x corrected by the offset estimate delta: the disparity u_left - corrected is the
+// true disparity.
+inline double CorrectRightX(const StereoCamera& cam, double u_right, double delta_px) {
+  return u_right + delta_px * OffsetBasis(cam, u_right);
+}
+struct OffsetPrior {
+  double variance_px2 = 0.25;  // [px^2] prior variance of the increment c (mean 0)
+  double sigma_px = 0.5;       // [px] pixel noise that scales the prior against the residuals
 };
 
 struct RefineResult {
@@ -118,9 +150,17 @@ struct RefineResult {
   // Hessian: sigma^2 (J^T J)^-1, sigma^2 estimated from the residuals.
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
   double rms_px = 0;        // [px] residual RMS at the solution
+  double sigma_px = 0;      // [px] pixel noise estimate behind the covariance (analytic solver)
   double initial_cost = 0;  // Ceres cost (1/2 sum rho(r^2)) before
   double final_cost = 0;    // and after
   int iterations = 0;
+  // Disparity offset increment c (only with an OffsetPrior): estimate [px], its posterior
+  // variance [px^2] (sigma^2 from the residuals, pose and points marginalised) and the
+  // information the data alone gave about it [1/px^2] (0: unobservable, e.g. no translation).
+  bool offset_estimated = false;
+  double offset_px = 0;
+  double offset_variance_px2 = 0;
+  double offset_data_information = 0;
 };
 
 // Refines T_a_b on the inliers by minimizing the stereo reprojection error (u_left, v, u_right)
@@ -128,10 +168,13 @@ struct RefineResult {
 // pose covariance is the Schur complement of the points); else the triangulated points are
 // fixed and reprojected both ways (p_a into b, p_b into a). `points_a` (optional) receives the
 // refined points in frame a.
+// `offset` (optional, analytic joint solver only): also estimate the disparity offset
+// increment (see OffsetPrior); the pose covariance is conditional on it (calibration-like).
 RefineResult RefineMotion(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
                           const std::vector<int>& inliers, const Eigen::Isometry3d& T_a_b_initial,
                           const RefineOptions& options,
-                          std::vector<Eigen::Vector3d>* points_a = nullptr);
+                          std::vector<Eigen::Vector3d>* points_a = nullptr,
+                          const OffsetPrior* offset = nullptr);
 
 // Adjoint of T for the [rho; phi] ordering: Exp(Ad(T) d) = T Exp(d) T^-1.
 Eigen::Matrix<double, 6, 6> Adjoint(const Eigen::Isometry3d& T);

@@ -52,6 +52,17 @@ struct StereoVoOptions {
   int subpixel_window_px = 11;         // [px] LK patch size (odd)
   double subpixel_max_shift_px = 1.5;  // [px] larger corrections drop the match
   int refine_rounds = 2;               // refine, re-select inliers by reprojection, repeat
+  // Online self-calibration of the disparity offset delta (measured disparity = true + delta;
+  // see OffsetPrior in motion.hpp and docs/STEREO_VO.md): every refinement also estimates it,
+  // a scalar Kalman filter (random walk) accumulates it over frames, and all disparities are
+  // corrected by the current estimate. Unobservable without translation (the filter then keeps
+  // its value). Needs the analytic two-view bundle adjustment (refine.optimize_points true,
+  // refine.use_ceres false).
+  bool estimate_disparity_offset = true;
+  double disparity_offset_initial_px = 0.0;     // [px] start value (e.g. a previous run's)
+  double disparity_offset_initial_sd_px = 0.3;  // [px] its uncertainty
+  double disparity_offset_drift_px = 0.02;      // [px/sqrt(s)] random walk of the true offset
+  double disparity_offset_max_px = 2.0;  // [px] larger |estimate|: reset, report (bad calibration)
   // Keyframes: a new one when the motion since the last keyframe or the loss of its features
   // exceeds one of these.
   double keyframe_translation_m = 1.0;   // [m]
@@ -76,6 +87,11 @@ struct StereoVoOptions {
     a->Visit("subpixel_window_px", &subpixel_window_px);
     a->Visit("subpixel_max_shift_px", &subpixel_max_shift_px);
     a->Visit("refine_rounds", &refine_rounds);
+    a->Visit("estimate_disparity_offset", &estimate_disparity_offset);
+    a->Visit("disparity_offset_initial_px", &disparity_offset_initial_px);
+    a->Visit("disparity_offset_initial_sd_px", &disparity_offset_initial_sd_px);
+    a->Visit("disparity_offset_drift_px", &disparity_offset_drift_px);
+    a->Visit("disparity_offset_max_px", &disparity_offset_max_px);
     a->Visit("keyframe_translation_m", &keyframe_translation_m);
     a->Visit("keyframe_rotation_deg", &keyframe_rotation_deg);
     a->Visit("keyframe_min_overlap", &keyframe_min_overlap);
@@ -118,6 +134,9 @@ struct FrameStats {
   int inliers = 0;           // inliers of the final refinement
   int ransac_iterations = 0;
   double reprojection_rms_px = 0;
+  // Disparity offset estimate after this frame [px] (measured minus true disparity; already
+  // subtracted from every disparity) and its standard deviation [px].
+  double disparity_offset_px = 0, disparity_offset_sd_px = 0;
   double ms_total = 0, ms_features = 0, ms_matching = 0, ms_motion = 0;
 };
 
@@ -180,6 +199,11 @@ class StereoVo {
   int64_t keyframe_max_track_id_ = -1;
   int keyframe_tracks_ = 0;
   int64_t next_track_id_ = 0;
+  // Disparity offset filter (scalar Kalman, random walk).
+  double offset_px_ = 0;
+  double offset_var_px2_ = 0;
+  Utime offset_utime_ = -1;      // time of the last update (for the random walk)
+  double pixel_sigma_px_ = 0.5;  // reprojection noise of the last refinement (scales the prior)
 };
 
 }  // namespace fl::vo
