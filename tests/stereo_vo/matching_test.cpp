@@ -1,8 +1,11 @@
-// Tests of features, stereo/temporal matching and the quadrilateral closed-loop check.
+// Tests of features, stereo/temporal matching, sub-pixel patch alignment and the quadrilateral
+// closed-loop check.
 #include "fusionloc/stereo_vo/matching.hpp"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <opencv2/imgproc.hpp>
 #include <random>
 
 #include "stereo_fixtures.hpp"
@@ -25,6 +28,57 @@ Features MakeFeatures(const std::vector<cv::Point2f>& pts, const std::vector<int
   }
   f.BuildIndex(640, 480);
   return f;
+}
+
+// A smooth texture evaluated at (x - sx, y - sy): an exact sub-pixel shift (no resampling).
+cv::Mat ShiftedTexture(double sx, double sy) {
+  cv::Mat img(120, 160, CV_8UC1);
+  for (int y = 0; y < img.rows; ++y) {
+    for (int x = 0; x < img.cols; ++x) {
+      const double u = x - sx, v = y - sy;
+      const double f = 128 + 50 * std::sin(0.31 * u + 0.7) * std::cos(0.23 * v) +
+                       40 * std::sin(0.17 * u - 0.29 * v + 1.3) +
+                       20 * std::cos(0.53 * v - 0.11 * u);
+      img.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(f);
+    }
+  }
+  return img;
+}
+
+TEST(StereoVoMatching, AlignPatchRecoversSubPixelShifts) {
+  const cv::Mat base = ShiftedTexture(0, 0);
+  for (const auto& [sx, sy] :
+       std::vector<std::pair<double, double>>{{0.3, 0.0}, {-0.45, 0.2}, {1.2, -0.7}, {-2.5, 0.4}}) {
+    const cv::Mat moved = ShiftedTexture(sx, sy);
+    for (const cv::Point2f p :
+         {cv::Point2f(50, 40), cv::Point2f(100, 70), cv::Point2f(80.5f, 60.25f)}) {
+      for (int half : {5, 7}) {
+        cv::Point2f q = p;  // start at the unshifted position
+        ASSERT_TRUE(AlignPatch(base, p, moved, half, &q)) << sx << " " << sy << " at " << p;
+        EXPECT_NEAR(q.x - p.x, sx, 0.05) << "half " << half << " at " << p;
+        EXPECT_NEAR(q.y - p.y, sy, 0.05) << "half " << half << " at " << p;
+      }
+    }
+  }
+}
+
+TEST(StereoVoMatching, AlignPatchRefusesFlatPatchesEdgesAndBorders) {
+  const cv::Mat flat(100, 100, CV_8UC1, cv::Scalar(90));
+  cv::Point2f q(50, 50);
+  EXPECT_FALSE(AlignPatch(flat, {50, 50}, flat, 5, &q)) << "no texture";
+  cv::Mat edge(100, 100, CV_8UC1, cv::Scalar(40));
+  edge.colRange(50, 100).setTo(200);  // vertical edge: vertical shift unconstrained
+  q = cv::Point2f(50, 50);
+  EXPECT_FALSE(AlignPatch(edge, {50, 50}, edge, 5, &q)) << "aperture problem";
+  const cv::Mat tex = ShiftedTexture(0, 0);
+  q = cv::Point2f(3, 60);
+  EXPECT_FALSE(AlignPatch(tex, {80, 60}, tex, 5, &q)) << "target patch leaves the image";
+  q = cv::Point2f(80, 60);
+  EXPECT_FALSE(AlignPatch(tex, {2, 60}, tex, 5, &q)) << "template patch leaves the image";
+  EXPECT_FALSE(AlignPatch(tex, {80, 60}, tex, 1, &q)) << "window too small";
+  cv::Mat color;
+  cv::cvtColor(tex, color, cv::COLOR_GRAY2BGR);
+  EXPECT_FALSE(AlignPatch(color, {80, 60}, color, 5, &q)) << "8-bit gray only";
 }
 
 TEST(StereoVoMatching, StereoMatchingHonoursEpipolarAndDisparityLimits) {

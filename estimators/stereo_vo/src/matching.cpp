@@ -111,42 +111,140 @@ void FeatureExtractor::Extract(const cv::Mat& gray, Features* out) {
     }
     scratch_.clear();
     cv::FAST(level_image, scratch_, options_.fast_threshold, true);
-    // Grid bucketing: the strongest `features_per_cell` corners of each cell.
+    // Grid bucketing: the strongest `features_per_cell` corners of each cell, kept sorted per
+    // cell by insertion (O(N k), no sort of all corners).
     const int cell = options_.cell_size_px;
     const int cols = (level_image.cols + cell - 1) / cell;
-    std::vector<std::pair<int, int>> order;  // (cell, index)
-    order.reserve(scratch_.size());
+    const int rows = (level_image.rows + cell - 1) / cell;
+    const int k = options_.features_per_cell;
+    cell_best_.assign(static_cast<size_t>(cols * rows * k), -1);
+    cell_count_.assign(static_cast<size_t>(cols * rows), 0);
     for (int i = 0; i < static_cast<int>(scratch_.size()); ++i) {
-      const cv::Point2f& p = scratch_[static_cast<size_t>(i)].pt;
+      const cv::KeyPoint& kp = scratch_[static_cast<size_t>(i)];
+      const cv::Point2f& p = kp.pt;
       if (p.x < kBorderPx || p.y < kBorderPx || p.x >= level_image.cols - kBorderPx ||
           p.y >= level_image.rows - kBorderPx) {
         continue;
       }
-      order.emplace_back(static_cast<int>(p.y) / cell * cols + static_cast<int>(p.x) / cell, i);
+      const int c = static_cast<int>(p.y) / cell * cols + static_cast<int>(p.x) / cell;
+      int* best = &cell_best_[static_cast<size_t>(c * k)];
+      int& n = cell_count_[static_cast<size_t>(c)];
+      // Position of the new corner among the cell's best (descending response).
+      int pos = n;
+      while (pos > 0 && scratch_[static_cast<size_t>(best[pos - 1])].response < kp.response) --pos;
+      if (pos >= k) continue;
+      for (int m = std::min(n, k - 1); m > pos; --m) best[m] = best[m - 1];
+      best[pos] = i;
+      n = std::min(n + 1, k);
     }
-    std::sort(order.begin(), order.end(), [&](const auto& a, const auto& b) {
-      if (a.first != b.first) return a.first < b.first;
-      return scratch_[static_cast<size_t>(a.second)].response >
-             scratch_[static_cast<size_t>(b.second)].response;
-    });
-    int run_cell = -1, taken = 0;
-    for (const auto& [c, i] : order) {
-      if (c != run_cell) {
-        run_cell = c;
-        taken = 0;
+    for (int c = 0; c < cols * rows; ++c) {
+      for (int m = 0; m < cell_count_[static_cast<size_t>(c)]; ++m) {
+        const int i = cell_best_[static_cast<size_t>(c * k + m)];
+        cv::KeyPoint kp = scratch_[static_cast<size_t>(i)];
+        kp.pt.x = static_cast<float>(kp.pt.x * scale);
+        kp.pt.y = static_cast<float>(kp.pt.y * scale);
+        kp.octave = level;
+        kp.angle = 0;  // upright descriptors: frame-to-frame rotation about the axis is small
+        kp.size = static_cast<float>(31 * scale);
+        out->keypoints.push_back(kp);
       }
-      if (taken++ >= options_.features_per_cell) continue;
-      cv::KeyPoint kp = scratch_[static_cast<size_t>(i)];
-      kp.pt.x = static_cast<float>(kp.pt.x * scale);
-      kp.pt.y = static_cast<float>(kp.pt.y * scale);
-      kp.octave = level;
-      kp.angle = 0;  // upright descriptors: frame-to-frame rotation about the axis is small
-      kp.size = static_cast<float>(31 * scale);
-      out->keypoints.push_back(kp);
     }
   }
   orb_->compute(gray, out->keypoints, out->descriptors);
   out->BuildIndex(gray.cols, gray.rows);
+}
+
+namespace {
+
+// The patch of half size h around p, plus a margin of `margin` px, lies inside the image for
+// bilinear sampling.
+inline bool PatchInside(const cv::Mat& img, cv::Point2f p, int h, int margin) {
+  const float lo = static_cast<float>(h + margin);
+  return p.x >= lo && p.y >= lo && p.x < static_cast<float>(img.cols - 1 - h - margin) &&
+         p.y < static_cast<float>(img.rows - 1 - h - margin);
+}
+
+// Samples the side x side patch (side = 2 h + 1) of an 8-bit image centred at c (bilinear; a
+// translation keeps the same interpolation weights for every pixel). The patch must be inside
+// (PatchInside). kSide > 0: the side as a compile-time constant (vectorised inner loop).
+template <int kSide>
+inline void SamplePatch(const cv::Mat& img, cv::Point2f c, int h, float* out) {
+  const int side = kSide > 0 ? kSide : 2 * h + 1;
+  const float x = c.x - static_cast<float>(h), y = c.y - static_cast<float>(h);
+  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+  const float ax = x - static_cast<float>(x0), ay = y - static_cast<float>(y0);
+  const float w00 = (1.f - ax) * (1.f - ay), w01 = ax * (1.f - ay), w10 = (1.f - ax) * ay,
+              w11 = ax * ay;
+  const size_t step = img.step[0];
+  const uint8_t* r0 = img.ptr<uint8_t>(y0) + x0;
+  for (int i = 0; i < side; ++i, r0 += step) {
+    const uint8_t* r1 = r0 + step;
+    float* o = out + i * side;
+    for (int j = 0; j < side; ++j) {
+      o[j] = w00 * r0[j] + w01 * r0[j + 1] + w10 * r1[j] + w11 * r1[j + 1];
+    }
+  }
+}
+
+template <int kSide>
+bool AlignPatchImpl(const cv::Mat& templ, cv::Point2f p_templ, const cv::Mat& target, int h,
+                    cv::Point2f* p_target, int max_iterations, float eps_px) {
+  constexpr int kMaxSide = 31;
+  const int side = kSide > 0 ? kSide : 2 * h + 1, big = side + 2, n = side * side;
+  // Template with a one-pixel ring for the central-difference gradients.
+  float ring[(kMaxSide + 2) * (kMaxSide + 2)], t[kMaxSide * kMaxSide], gx[kMaxSide * kMaxSide],
+      gy[kMaxSide * kMaxSide], r[kMaxSide * kMaxSide];
+  SamplePatch<kSide + 2 * (kSide > 0)>(templ, p_templ, h + 1, ring);
+  float hxx = 0, hxy = 0, hyy = 0;
+  for (int i = 0, k = 0; i < side; ++i) {
+    const float* row = ring + (i + 1) * big + 1;
+    for (int j = 0; j < side; ++j, ++k) {
+      t[k] = row[j];
+      gx[k] = 0.5f * (row[j + 1] - row[j - 1]);
+      gy[k] = 0.5f * (row[j + big] - row[j - big]);
+      hxx += gx[k] * gx[k];
+      hxy += gx[k] * gy[k];
+      hyy += gy[k] * gy[k];
+    }
+  }
+  const double det = static_cast<double>(hxx) * hyy - static_cast<double>(hxy) * hxy;
+  // Too little texture, or an edge (one direction unconstrained): the mean of the gradient
+  // products per pixel (det / n^2) below 1e-2 gray^4 / px^2.
+  if (!(det > 1e-2 * static_cast<double>(n) * static_cast<double>(n))) return false;
+  cv::Point2f p = *p_target;
+  for (int it = 0; it < max_iterations; ++it) {
+    if (!PatchInside(target, p, h, 0)) return false;
+    SamplePatch<kSide>(target, p, h, r);
+    float bx = 0, by = 0;
+    for (int k = 0; k < n; ++k) {
+      const float e = r[k] - t[k];
+      bx += gx[k] * e;
+      by += gy[k] * e;
+    }
+    const double dx = (hyy * static_cast<double>(bx) - hxy * static_cast<double>(by)) / det;
+    const double dy = (hxx * static_cast<double>(by) - hxy * static_cast<double>(bx)) / det;
+    p.x -= static_cast<float>(dx);
+    p.y -= static_cast<float>(dy);
+    if (dx * dx + dy * dy < static_cast<double>(eps_px) * eps_px) {
+      *p_target = p;
+      return PatchInside(target, p, h, 0);
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+bool AlignPatch(const cv::Mat& templ, cv::Point2f p_templ, const cv::Mat& target, int half_window,
+                cv::Point2f* p_target, int max_iterations, float eps_px) {
+  const int h = half_window;
+  if (h < 2 || 2 * h + 1 > 31 || templ.type() != CV_8UC1 || target.type() != CV_8UC1) {
+    return false;
+  }
+  if (!PatchInside(templ, p_templ, h, 1) || !PatchInside(target, *p_target, h, 0)) return false;
+  if (h == 5)
+    return AlignPatchImpl<11>(templ, p_templ, target, h, p_target, max_iterations, eps_px);
+  return AlignPatchImpl<0>(templ, p_templ, target, h, p_target, max_iterations, eps_px);
 }
 
 std::vector<int> MatchStereo(const Features& left, const Features& right,

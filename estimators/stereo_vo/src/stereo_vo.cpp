@@ -4,7 +4,6 @@
 #include <chrono>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
 #include <sstream>
 #include <stdexcept>
 
@@ -167,36 +166,28 @@ StereoVo::~StereoVo() = default;
 // alignment fails, moves more than subpixel_max_shift_px or leaves the row are dropped.
 int StereoVo::RefineStereo(Frame* f) const {
   f->right_x.assign(f->stereo.size(), -1.0f);
-  std::vector<cv::Point2f> pl, pr;
-  std::vector<int> idx;
+  const bool subpixel = options_.subpixel_refinement;
+  const int half = options_.subpixel_window_px / 2;
+  const float max_shift = static_cast<float>(options_.subpixel_max_shift_px);
+  int dropped = 0;
   for (size_t i = 0; i < f->stereo.size(); ++i) {
     const int j = f->stereo[i];
     if (j < 0) continue;
-    pl.push_back(f->fl.keypoints[i].pt);
-    pr.push_back(f->fr.keypoints[static_cast<size_t>(j)].pt);
-    f->right_x[i] = pr.back().x;
-    idx.push_back(static_cast<int>(i));
-  }
-  if (!options_.subpixel_refinement || pl.empty()) return 0;
-  const cv::Size win(options_.subpixel_window_px, options_.subpixel_window_px);
-  const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.01);
-  std::vector<uchar> ok;
-  std::vector<float> err;
-  std::vector<cv::Point2f> refined = pr;
-  cv::calcOpticalFlowPyrLK(f->left, f->right, pl, refined, ok, err, win, 0, term,
-                           cv::OPTFLOW_USE_INITIAL_FLOW);
-  const float max_shift = static_cast<float>(options_.subpixel_max_shift_px);
-  int dropped = 0;
-  for (size_t k = 0; k < idx.size(); ++k) {
-    const size_t i = static_cast<size_t>(idx[k]);
-    if (!ok[k] || std::abs(refined[k].x - pr[k].x) > max_shift ||
-        std::abs(refined[k].y - pl[k].y) > 1.0f || !(pl[k].x - refined[k].x > 0)) {
+    const cv::Point2f pl = f->fl.keypoints[i].pt;
+    const cv::Point2f pr = f->fr.keypoints[static_cast<size_t>(j)].pt;
+    if (!subpixel) {
+      f->right_x[i] = pr.x;
+      continue;
+    }
+    cv::Point2f refined = pr;
+    if (!AlignPatch(f->left, pl, f->right, half, &refined) ||
+        std::abs(refined.x - pr.x) > max_shift || std::abs(refined.y - pl.y) > 1.0f ||
+        !(pl.x - refined.x > 0)) {
       f->stereo[i] = -1;
-      f->right_x[i] = -1.0f;
       ++dropped;
       continue;
     }
-    f->right_x[i] = refined[k].x;
+    f->right_x[i] = refined.x;
   }
   return dropped;
 }

@@ -16,7 +16,7 @@
 namespace fl::vo {
 
 struct FeatureOptions {
-  int fast_threshold = 12;    // [gray levels] FAST corner threshold
+  int fast_threshold = 16;    // [gray levels] FAST corner threshold
   int cell_size_px = 32;      // [px] grid bucketing cell (features spread evenly)
   int features_per_cell = 4;  // strongest FAST corners kept per cell and pyramid level
   int pyramid_levels = 1;     // ORB pyramid levels (1 = full resolution only)
@@ -75,6 +75,8 @@ class FeatureExtractor {
   FeatureOptions options_;
   cv::Ptr<cv::ORB> orb_;
   std::vector<cv::KeyPoint> scratch_;
+  std::vector<int> cell_best_;   // per grid cell: indices of its strongest corners
+  std::vector<int> cell_count_;  // per grid cell: how many of them
 };
 
 struct MatchOptions {
@@ -112,6 +114,15 @@ std::vector<int> MatchStereo(const Features& left, const Features& right,
 std::vector<int> MatchTemporal(const Features& from, const Features& to,
                                const std::vector<cv::Point2f>& predicted, double radius,
                                const MatchOptions& options);
+
+// Sub-pixel alignment of a square patch by inverse-compositional Lucas-Kanade (translation):
+// finds *p_target (start: its value) where the (2 half_window + 1)^2 patch of `target` best
+// matches the patch of `templ` centred at p_templ (both 8-bit gray; bilinear sampling, central
+// difference gradients of the template). Returns false, leaving *p_target unspecified, if the
+// template has too little texture, a patch leaves its image or it does not converge within
+// max_iterations. half_window in [2, 15]. No allocation: cheap for many points.
+bool AlignPatch(const cv::Mat& templ, cv::Point2f p_templ, const cv::Mat& target, int half_window,
+                cv::Point2f* p_target, int max_iterations = 10, float eps_px = 0.01f);
 
 // One closed quadrilateral: keypoint indices in the four images (a = time t, b = time t+1).
 struct Quad {
