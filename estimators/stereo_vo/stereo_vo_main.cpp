@@ -176,6 +176,10 @@ int main(int argc, char** argv) {
         status.Set("inliers", r.stats.inliers);
         status.Set("features_left", r.stats.features_left);
         status.Set("segment", r.segment);
+        // Online rectification check (docs/STEREO_VO.md): a large or drifting value means the
+        // stereo calibration is off.
+        status.Set("disparity_offset_px", r.stats.disparity_offset_px);
+        status.Set("disparity_offset_sd_px", r.stats.disparity_offset_sd_px);
       });
 
   FL_LOG(INFO) << "listening on " << in_stereo << " and " << in_calib << " (" << lcm->url() << ")";
