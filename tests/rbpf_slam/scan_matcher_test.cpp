@@ -17,7 +17,9 @@ TEST(ScanMatcher, LikelihoodFollowsEquation3) {
   mo.sigma = 0.05;
   mo.z_hit = 0.9;
   mo.z_rand = 0.1;
-  // Points at 0, 0.1 and beyond the field (0.4 m) from the obstacle.
+  // Points at 0, 0.1 and beyond the field (0.4 m) from the obstacle, all in observed cells.
+  g.UpdateCell(2, 0, -30);
+  g.UpdateCell(40, 40, -30);
   const std::vector<Eigen::Vector2d> pts = {{0.025, 0.025}, {0.125, 0.025}, {2.0, 2.0}};
   int inliers = 0;
   const double ll = ScanLogLikelihood(g, pts, fl::Pose2(), mo, &inliers);
@@ -26,6 +28,38 @@ TEST(ScanMatcher, LikelihoodFollowsEquation3) {
   EXPECT_EQ(inliers, 2);
   // Moving away from the obstacle lowers the likelihood.
   EXPECT_LT(ScanLogLikelihood(g, pts, fl::Pose2(0.05, 0, 0), mo), ll);
+  // A point in a never-observed cell is scored at the mean of the others (skip_unexplored).
+  const std::vector<Eigen::Vector2d> with_unknown = {{0.025, 0.025}, {0.125, 0.025}, {-5.0, -5.0}};
+  mo.skip_unexplored = true;
+  mo.unexplored_margin = 0.0;
+  EXPECT_NEAR(ScanLogLikelihood(g, with_unknown, fl::Pose2(), mo), 1.5 * (p(0.0) + p(0.1)), 1e-3);
+  mo.skip_unexplored = false;
+  EXPECT_NEAR(ScanLogLikelihood(g, with_unknown, fl::Pose2(), mo), p(0.0) + p(0.1) + p(0.4), 1e-3);
+}
+
+TEST(ScanMatcher, DegenerateDirectionOfACorridorIsDetected) {
+  // Hessian of a corridor along x (points on walls y = ±1.25, normals ±y) plus a weak x term.
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  for (double x = -8.0; x <= 8.0; x += 0.05) {
+    for (double side : {-1.0, 1.0}) {
+      const Eigen::Vector3d J(0.0, side,
+                              side * x);  // d/d(x, y, θ) of the distance to wall y = ±1.25
+      H += J * J.transpose();
+    }
+  }
+  H(0, 0) += 1.0;
+  int degenerate = 0;
+  const Eigen::Matrix3d P = WellConstrainedProjector(H, 5.0, 0.1, &degenerate);
+  EXPECT_EQ(degenerate, 1);
+  // A step along x is removed, steps along y and θ are kept.
+  EXPECT_NEAR((P * Eigen::Vector3d(1, 0, 0)).norm(), 0.0, 1e-9);
+  EXPECT_NEAR((P * Eigen::Vector3d(0, 1, 0) - Eigen::Vector3d(0, 1, 0)).norm(), 0.0, 1e-9);
+  EXPECT_NEAR((P * Eigen::Vector3d(0, 0, 1) - Eigen::Vector3d(0, 0, 1)).norm(), 0.0, 1e-9);
+  // Off (ratio 0) or a well-constrained scene: identity.
+  EXPECT_TRUE(WellConstrainedProjector(H, 5.0, 0.0).isIdentity());
+  EXPECT_TRUE(WellConstrainedProjector(Eigen::Matrix3d::Identity() * 100, 1.0, 0.1, &degenerate)
+                  .isIdentity());
+  EXPECT_EQ(degenerate, 0);
 }
 
 TEST(ScanMatcher, RecoversAPerturbedPoseInTheRoom) {

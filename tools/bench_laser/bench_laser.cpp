@@ -8,12 +8,17 @@
 // since them) is compared with GROUND_TRUTH: ATE RMSE after SE(2) alignment, RPE over
 // consecutive scan pairs. The raw mit-csail.clf is compared with csail-corrected.log.gz, whose
 // scans get the raw log's time stamps by matching ranges (CarmenOptions::timestamps_from).
+// Consistency of the published keyframe factors: chi2 = eᵀ Ω e of each factor's error e against
+// the reference relative pose (x, y, yaw); about 3 (median 2.37) when the information is
+// calibrated. With --sim-worlds the simulated worlds of fl::sim (config/sim_<world>.yaml,
+// laser and wheel odometry only, camera off) are run the same way against their ground truth.
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <iostream>
 #include <limits>
-#include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -28,6 +33,7 @@
 #include "fusionloc/importers/carmen.hpp"
 #include "fusionloc/rbpf_slam/odometry_buffer.hpp"
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
+#include "fusionloc/sim/simulator.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
 namespace fs = std::filesystem;
@@ -36,14 +42,14 @@ namespace {
 
 struct Input {
   std::string name;
-  std::string log;        // CARMEN log to run
-  std::string reference;  // CARMEN log whose GROUND_TRUTH is the reference ("" = log itself)
+  std::string log;         // CARMEN log to run
+  std::string reference;   // CARMEN log whose GROUND_TRUTH is the reference ("" = log itself)
+  std::string sim_config;  // a simulated world's options (config/sim_<world>.yaml) instead of a log
 };
 
 struct LogData {
   std::vector<fl::rbpf::LaserScan> scans;
-  fl::rbpf::OdometryBuffer odom{std::numeric_limits<int64_t>::max() / 4,
-                                5 * fl::kUtimePerSecond};
+  fl::rbpf::OdometryBuffer odom{std::numeric_limits<int64_t>::max() / 4, 5 * fl::kUtimePerSecond};
   fl::eval::Trajectory ground_truth;
 };
 
@@ -115,16 +121,69 @@ void WritePng(const fl::rbpf::TiledGrid& map, const fl::eval::Trajectory& est,
   cv::imwrite(path, img);
 }
 
+// Reference pose nearest in time to t (within max_dt), or false.
+bool ReferenceAt(const fl::eval::Trajectory& ref, fl::Utime t, fl::Utime max_dt, fl::Pose2* out) {
+  auto it =
+      std::lower_bound(ref.begin(), ref.end(), t,
+                       [](const fl::eval::StampedPose& p, fl::Utime u) { return p.utime < u; });
+  const fl::eval::StampedPose* best = nullptr;
+  if (it != ref.end()) best = &*it;
+  if (it != ref.begin() && (!best || t - std::prev(it)->utime < best->utime - t))
+    best = &*std::prev(it);
+  if (!best || std::abs(best->utime - t) > max_dt) return false;
+  *out = fl::Pose2::FromIsometry3(best->T_world_base);
+  return true;
+}
+
+// chi2 = eᵀ Ω e of a factor against the reference (-1 if the reference lacks a time).
+double FactorChi2(const fl::rbpf::KeyframeFactor& f, const fl::eval::Trajectory& ref,
+                  fl::Utime max_dt) {
+  fl::Pose2 a, b;
+  if (!ReferenceAt(ref, f.utime_i, max_dt, &a) || !ReferenceAt(ref, f.utime_j, max_dt, &b))
+    return -1;
+  const fl::Pose2 t = a.between(b);
+  const Eigen::Vector3d e(f.T_i_j.x - t.x, f.T_i_j.y - t.y, fl::WrapAngle(f.T_i_j.theta - t.theta));
+  return e.dot(f.information * e);
+}
+
+// Laser scans, odometry and ground truth of a simulated world (camera off).
+LogData SimulateWorld(fl::sim::SimOptions so, fl::Pose2* T_base_laser) {
+  so.camera.enabled = false;
+  fl::sim::Simulator sim(so);
+  LogData d;
+  fl::sim::SimFrame f;
+  bool have_cal = false;
+  while (sim.Step(&f)) {
+    if (f.calibration && !have_cal) {
+      have_cal = true;
+      *T_base_laser = fl::Pose2::FromIsometry3(fl::IsometryFromArrays(
+          f.calibration->T_base_laser.trans, f.calibration->T_base_laser.quat));
+    }
+    d.ground_truth.push_back({f.utime, f.T_world_base.ToIsometry3()});
+    (void)d.odom.Add(f.utime, f.T_odom_base);
+    if (f.laser) {
+      fl::rbpf::LaserScan s;
+      s.utime = f.laser->utime;
+      s.ranges = f.laser->ranges;
+      s.rad0 = f.laser->rad0;
+      s.radstep = f.laser->radstep;
+      d.scans.push_back(std::move(s));
+    }
+  }
+  return d;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::CommandLine cli("fl-bench-laser",
-                      "Runs the laser RBPF-SLAM on the CARMEN logs of DATA/laser (raw mit-csail.clf "
-                      "against csail-corrected.log.gz; every *-corrected log with the importer's "
-                      "seeded synthetic odometry noise against its own poses; any other CARMEN log "
-                      "(.clf, .log, .log.gz) likewise) and reports ATE (SE(2)-aligned), RPE over "
-                      "consecutive scans, ms per scan (AddScan only, one core) and peak memory, "
-                      "and writes a PNG of each map with both trajectories.");
+  fl::CommandLine cli(
+      "fl-bench-laser",
+      "Runs the laser RBPF-SLAM on the CARMEN logs of DATA/laser (raw mit-csail.clf "
+      "against csail-corrected.log.gz; every *-corrected log with the importer's "
+      "seeded synthetic odometry noise against its own poses; any other CARMEN log "
+      "(.clf, .log, .log.gz) likewise) and reports ATE (SE(2)-aligned), RPE over "
+      "consecutive scans, ms per scan (AddScan only, one core) and peak memory, "
+      "and writes a PNG of each map with both trajectories.");
   fl::bench::CommonArgs args;
   fl::bench::AddCommonFlags(&cli, &args, "laser");
   std::string config;
@@ -132,13 +191,21 @@ int main(int argc, char** argv) {
   std::string png_dir = "out/bench/laser";
   int particles = 0;
   uint64_t seed = 1;
-  cli.AddFlag("config", &config, "RBPF options YAML (default: built-in defaults = config/rbpf_slam.yaml)");
+  cli.AddFlag("config", &config,
+              "RBPF options YAML (default: built-in defaults = config/rbpf_slam.yaml)");
   cli.AddFlag("only", &only, "run only logs whose file name contains this text");
   cli.AddFlag("particles", &particles, "override the particle count (0 = from the options)");
   cli.AddFlag("noise-seed", &seed, "seed of the synthetic odometry noise of corrected logs");
   cli.AddFlag("png-dir", &png_dir, "folder for the map PNGs");
+  std::string sim_worlds;
+  std::string config_dir = "config";
+  cli.AddFlag("sim-worlds", &sim_worlds,
+              "also run these simulated worlds, comma-separated (e.g. paper,corridor; options from "
+              "CONFIG_DIR/sim_<world>.yaml, laser + odometry only), named sim-<world>");
+  cli.AddFlag("config-dir", &config_dir, "folder with sim_<world>.yaml (for --sim-worlds)");
   bool dump = false;
-  cli.AddFlag("dump", &dump, "also write the estimate and reference trajectories (TUM) next to the PNGs");
+  cli.AddFlag("dump", &dump,
+              "also write the estimate and reference trajectories (TUM) next to the PNGs");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
 
   fl::rbpf::RbpfSlamOptions options;
@@ -172,12 +239,23 @@ int main(int argc, char** argv) {
     if (n == "mit-csail.clf") {
       const fs::path ref = f.parent_path() / "csail-corrected.log.gz";
       if (!fs::exists(ref)) {
-        std::cerr << "fl-bench-laser: skipping " << f << ": its reference " << ref << " is missing\n";
+        std::cerr << "fl-bench-laser: skipping " << f << ": its reference " << ref
+                  << " is missing\n";
         continue;
       }
       in.reference = ref.string();
       in.name = "mit-csail-raw";
     }
+    inputs.push_back(in);
+  }
+  for (size_t a = 0, b; a < sim_worlds.size(); a = b + 1) {
+    b = sim_worlds.find(',', a);
+    if (b == std::string::npos) b = sim_worlds.size();
+    if (b == a) continue;
+    Input in;
+    in.name = "sim-" + sim_worlds.substr(a, b - a);
+    in.sim_config = config_dir + "/sim_" + sim_worlds.substr(a, b - a) + ".yaml";
+    in.log = in.sim_config;
     inputs.push_back(in);
   }
   if (inputs.empty()) {
@@ -187,37 +265,50 @@ int main(int argc, char** argv) {
   }
 
   fl::bench::Report report("laser");
-  const std::string tmp = (fs::temp_directory_path() / ("fl_bench_laser_" + std::to_string(getpid()))).string();
+  const std::string tmp =
+      (fs::temp_directory_path() / ("fl_bench_laser_" + std::to_string(getpid()))).string();
   fs::create_directories(tmp);
   int failures = 0;
   for (const Input& in : inputs) {
     try {
-      fl::importers::CarmenOptions co;
-      co.seed = seed;
-      const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
-      if (!in.reference.empty()) co.noisy_odometry = "false";
-      // csail-corrected.log.gz printed its time stamps with 6 significant digits: take them from
-      // the raw log of the same run when it is there (matched by ranges).
-      const fs::path raw_csail = fs::path(in.log).parent_path() / "mit-csail.clf";
-      if (fs::path(in.log).filename() == "csail-corrected.log.gz" && fs::exists(raw_csail)) {
-        co.timestamps_from = raw_csail.string();
-      }
-      fl::importers::ConvertCarmen(co, in.log, lcm_log);
-      LogData data = ReadLcm(lcm_log);
-      if (!in.reference.empty()) {
-        fl::importers::CarmenOptions ro;
-        ro.noisy_odometry = "true";
-        ro.timestamps_from = in.log;
-        const std::string ref_log = tmp + "/" + in.name + ".ref.lcmlog";
-        fl::importers::ConvertCarmen(ro, in.reference, ref_log);
-        data.ground_truth = ReadLcm(ref_log).ground_truth;
+      fl::rbpf::RbpfSlamOptions run_options = options;
+      LogData data;
+      if (!in.sim_config.empty()) {
+        fl::Pose2 T_base_laser;
+        data = SimulateWorld(fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config), &T_base_laser);
+        run_options.base_laser_x = T_base_laser.x;
+        run_options.base_laser_y = T_base_laser.y;
+        run_options.base_laser_yaw = T_base_laser.theta;
+      } else {
+        fl::importers::CarmenOptions co;
+        co.seed = seed;
+        const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
+        if (!in.reference.empty()) co.noisy_odometry = "false";
+        // csail-corrected.log.gz printed its time stamps with 6 significant digits: take them from
+        // the raw log of the same run when it is there (matched by ranges).
+        const fs::path raw_csail = fs::path(in.log).parent_path() / "mit-csail.clf";
+        if (fs::path(in.log).filename() == "csail-corrected.log.gz" && fs::exists(raw_csail)) {
+          co.timestamps_from = raw_csail.string();
+        }
+        fl::importers::ConvertCarmen(co, in.log, lcm_log);
+        data = ReadLcm(lcm_log);
+        if (!in.reference.empty()) {
+          fl::importers::CarmenOptions ro;
+          ro.noisy_odometry = "true";
+          ro.timestamps_from = in.log;
+          const std::string ref_log = tmp + "/" + in.name + ".ref.lcmlog";
+          fl::importers::ConvertCarmen(ro, in.reference, ref_log);
+          data.ground_truth = ReadLcm(ref_log).ground_truth;
+        }
       }
       if (data.ground_truth.size() < 3) throw std::runtime_error("fewer than 3 ground-truth poses");
 
-      fl::rbpf::RbpfSlam slam(options);
-      std::vector<double> ms_processed, ms_all;
+      const fl::Utime max_dt = 20000;
+      fl::rbpf::RbpfSlam slam(run_options);
+      std::vector<double> ms_processed, ms_all, chi2_seq, chi2_loop;
       int64_t skipped = 0;
-      fl::bench::Progress progress("[bench laser] " + in.name, static_cast<int64_t>(data.scans.size()));
+      fl::bench::Progress progress("[bench laser] " + in.name,
+                                   static_cast<int64_t>(data.scans.size()));
       for (size_t i = 0; i < data.scans.size(); ++i) {
         fl::Pose2 odom;
         if (!data.odom.Lookup(data.scans[i].utime, &odom).ok()) {
@@ -227,25 +318,34 @@ int main(int argc, char** argv) {
         fl::rbpf::ScanResult r;
         const auto t0 = std::chrono::steady_clock::now();
         const fl::Status s = slam.AddScan(data.scans[i], odom, &r);
-        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        const double ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                .count();
         if (!s.ok()) {
           ++skipped;
           continue;
         }
         ms_all.push_back(ms);
+        for (const fl::rbpf::KeyframeFactor& f : r.factors) {
+          const double c = FactorChi2(f, data.ground_truth, max_dt);
+          if (c >= 0) (f.is_loop_closure ? chi2_loop : chi2_seq).push_back(c);
+        }
         if (r.processed) ms_processed.push_back(ms);
         progress.Update(static_cast<int64_t>(i + 1));
       }
       const auto t0 = std::chrono::steady_clock::now();
       slam.Finish();
-      const double finish_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      const double finish_ms =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
       progress.Finish();
 
       fl::eval::Trajectory est;
-      for (const auto& p : slam.Trajectory()) est.push_back({p.utime, p.T_world_base.ToIsometry3()});
-      const fl::Utime max_dt = 20000;
-      const fl::eval::AteResult ate = fl::eval::ComputeAte(est, data.ground_truth, fl::eval::Alignment::kSE2, max_dt);
-      const fl::eval::RpeResult rpe = fl::eval::ComputeRpe(est, data.ground_truth, 1, fl::eval::DeltaUnit::kFrames, max_dt);
+      for (const auto& p : slam.Trajectory())
+        est.push_back({p.utime, p.T_world_base.ToIsometry3()});
+      const fl::eval::AteResult ate =
+          fl::eval::ComputeAte(est, data.ground_truth, fl::eval::Alignment::kSE2, max_dt);
+      const fl::eval::RpeResult rpe =
+          fl::eval::ComputeRpe(est, data.ground_truth, 1, fl::eval::DeltaUnit::kFrames, max_dt);
       const fl::bench::Stats sp = fl::bench::ComputeStats(ms_processed);
       const fl::bench::Stats sa = fl::bench::ComputeStats(ms_all);
       fl::bench::Run run;
@@ -267,18 +367,31 @@ int main(int argc, char** argv) {
           .Add("loop_closures", static_cast<double>(st.loop_closures))
           .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
           .Add("resamples", static_cast<double>(st.resamples))
+          .Add("degenerate_pct",
+               100.0 * static_cast<double>(st.degenerate_matches) /
+                   std::max<double>(1.0, static_cast<double>(st.processed * options.particles)))
           .Add("dropped", static_cast<double>(skipped))
+          .Add("factors", static_cast<double>(chi2_seq.size()))
+          .Add("factor_chi2_median",
+               chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).median)
+          .Add("factor_chi2_p95", chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).p95)
+          .Add("loop_factors", static_cast<double>(chi2_loop.size()))
+          .Add("loop_chi2_median",
+               chi2_loop.empty() ? -1.0 : fl::bench::ComputeStats(chi2_loop).median)
           .Add("peak_rss_mb", fl::bench::PeakRssMb());
       const std::string png = png_dir + "/" + in.name + ".png";
       fl::eval::Trajectory ref_in_map;
       const Eigen::Isometry3d T_est_ref = ate.T_ref_est.inverse();
-      for (const auto& p : ate.ref_matched) ref_in_map.push_back({p.utime, T_est_ref * p.T_world_base});
+      for (const auto& p : ate.ref_matched)
+        ref_in_map.push_back({p.utime, T_est_ref * p.T_world_base});
       WritePng(slam.BestMap(), est, ref_in_map, png);
       if (dump) {
         fl::eval::WriteTrajectoryTum(est, png_dir + "/" + in.name + ".est.tum");
         fl::eval::WriteTrajectoryTum(data.ground_truth, png_dir + "/" + in.name + ".ref.tum");
       }
       run.note = "png " + png + "; particles " + std::to_string(options.particles) +
+                 "; factor_chi2 = e^T Omega e of the sequential ICP factors against the reference "
+                 "(calibrated: median ~2.4), loop_chi2 the same for loop closures" +
                  "; ICP factors failed " + std::to_string(st.icp_failures) +
                  "; ms_per_item = every scan, ms_per_processed = scans the filter ran on";
       report.AddRun(run);

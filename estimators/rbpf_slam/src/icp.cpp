@@ -7,32 +7,43 @@
 #include <cstdint>
 #include <unordered_map>
 
+#include "fusionloc/rbpf_slam/scan_matcher.hpp"
+
 namespace fl::rbpf {
 
-std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts, double max_gap) {
+std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts, double radius,
+                                        double max_eigen_ratio, double max_gap) {
   std::vector<PointNormal> out;
   out.reserve(pts.size());
   const int n = static_cast<int>(pts.size());
+  const double r2 = radius * radius, g2 = max_gap * max_gap;
   for (int i = 0; i < n; ++i) {
-    Eigen::Vector2d mean = pts[i];
-    int count = 1;
-    for (int k = i - 2; k <= i + 2; ++k) {
-      if (k == i || k < 0 || k >= n) continue;
-      if ((pts[k] - pts[i]).norm() > max_gap) continue;
-      mean += pts[k];
-      ++count;
+    // Neighbours in scan order on both sides, within `radius` of p_i, no gap above max_gap.
+    int lo = i, hi = i;
+    while (lo > 0 && (pts[lo - 1] - pts[lo]).squaredNorm() <= g2 &&
+           (pts[lo - 1] - pts[i]).squaredNorm() <= r2) {
+      --lo;
     }
+    while (hi < n - 1 && (pts[hi + 1] - pts[hi]).squaredNorm() <= g2 &&
+           (pts[hi + 1] - pts[i]).squaredNorm() <= r2) {
+      ++hi;
+    }
+    const int count = hi - lo + 1;
     if (count < 3) continue;
+    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+    for (int k = lo; k <= hi; ++k) mean += pts[k];
     mean /= count;
     Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
-    for (int k = i - 2; k <= i + 2; ++k) {
-      if (k < 0 || k >= n || (pts[k] - pts[i]).norm() > max_gap) continue;
+    for (int k = lo; k <= hi; ++k) {
       const Eigen::Vector2d d = pts[k] - mean;
       cov += d * d.transpose();
     }
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
     // A line: the small eigenvalue must be much smaller than the large one.
-    if (es.eigenvalues()(0) > 0.1 * es.eigenvalues()(1)) continue;
+    if (!(es.eigenvalues()(1) > 0.0) ||
+        es.eigenvalues()(0) > max_eigen_ratio * es.eigenvalues()(1)) {
+      continue;
+    }
     PointNormal pn;
     pn.p = pts[i];
     pn.n = es.eigenvectors().col(0).normalized();
@@ -41,12 +52,65 @@ std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts,
   return out;
 }
 
+int IcpCovariance(const Eigen::Matrix3d& H, const Eigen::Matrix3d& M, int n, double correlation,
+                  double length_m, const IcpOptions& o, Eigen::Matrix3d* covariance,
+                  Eigen::Matrix3d* information) {
+  const double L = length_m > 0.0 ? length_m : 1.0;
+  const Eigen::Vector3d s(1.0, 1.0, 1.0 / L);  // (x, y, θ) -> scaled (x, y, L·θ)
+  const Eigen::Matrix3d Hs = s.asDiagonal() * (0.5 * (H + H.transpose())) * s.asDiagonal();
+  // Residual "meat" with the small-sample correction n/(n-3) and the σ̂ floor.
+  const double dof = n > 3 ? static_cast<double>(n) / (n - 3) : 1.0;
+  const Eigen::Matrix3d Ms = s.asDiagonal() *
+                             (dof * 0.5 * (M + M.transpose()) + o.min_sigma * o.min_sigma * H) *
+                             s.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Hs);
+  const double rho = std::clamp(correlation, 0.0, 0.95);
+  const double kappa = (1.0 + rho) / (1.0 - rho);
+  const double max_var = o.max_sigma_xy * o.max_sigma_xy;  // scaled units: m² (θ: (L·rad)²)
+  const double lmax = std::max(es.eigenvalues()(2), 0.0);
+  // H⁺ over the constrained directions; the others get max_var.
+  Eigen::Matrix3d Hp = Eigen::Matrix3d::Zero(), cov_s = Eigen::Matrix3d::Zero();
+  int degenerate = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double l = es.eigenvalues()(k);
+    const Eigen::Vector3d v = es.eigenvectors().col(k);
+    if (l > std::max(1e-9, o.degeneracy_ratio) * lmax && l > 0.0) {
+      Hp += (1.0 / l) * v * v.transpose();
+    } else {
+      ++degenerate;
+      cov_s += max_var * v * v.transpose();
+    }
+  }
+  cov_s += kappa * Hp * Ms * Hp;  // sandwich: H⁻¹ (Σ J Jᵀ e²) H⁻¹
+  // Back to (x, y, θ), add the floor, cap every eigenvalue (in scaled units) at max_var.
+  Eigen::Matrix3d cov = s.asDiagonal() * cov_s * s.asDiagonal();
+  cov += Eigen::Vector3d(o.floor_sigma_xy * o.floor_sigma_xy, o.floor_sigma_xy * o.floor_sigma_xy,
+                         o.floor_sigma_theta * o.floor_sigma_theta)
+             .asDiagonal();
+  const Eigen::Matrix3d cs = s.cwiseInverse().asDiagonal() * cov * s.cwiseInverse().asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ec(0.5 * (cs + cs.transpose()));
+  Eigen::Matrix3d info_s = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d cov_capped_s = Eigen::Matrix3d::Zero();
+  for (int k = 0; k < 3; ++k) {
+    const double v = std::min(max_var, std::max(ec.eigenvalues()(k), 1e-12));
+    const Eigen::Vector3d u = ec.eigenvectors().col(k);
+    cov_capped_s += v * u * u.transpose();
+    info_s += (1.0 / v) * u * u.transpose();
+  }
+  *covariance = s.asDiagonal() * cov_capped_s * s.asDiagonal();
+  *information = s.cwiseInverse().asDiagonal() * info_s * s.cwiseInverse().asDiagonal();
+  *covariance = 0.5 * (*covariance + covariance->transpose());
+  *information = 0.5 * (*information + information->transpose());
+  return degenerate;
+}
+
 namespace {
 // A uniform hash grid over the reference points for nearest-neighbour queries.
 class PointHash {
  public:
   PointHash(const std::vector<PointNormal>& pts, double cell) : pts_(pts), inv_(1.0 / cell) {
-    for (size_t i = 0; i < pts.size(); ++i) map_[Key(Cell(pts[i].p.x()), Cell(pts[i].p.y()))].push_back(static_cast<int>(i));
+    for (size_t i = 0; i < pts.size(); ++i)
+      map_[Key(Cell(pts[i].p.x()), Cell(pts[i].p.y()))].push_back(static_cast<int>(i));
   }
   // Index of the nearest reference point within max_d, or -1.
   int Nearest(const Eigen::Vector2d& q, double max_d) const {
@@ -92,6 +156,9 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
     return r;
   }
   const PointHash hash(reference, o.max_correspondence_m);
+  double query_sq = 0.0;
+  for (const Eigen::Vector2d& q : query) query_sq += q.squaredNorm();
+  const double length_m = std::sqrt(query_sq / static_cast<double>(query.size()));
   fl::Pose2 T = initial;
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
   double sum_sq = 0.0;
@@ -100,8 +167,8 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
   for (int it = 0; it < o.max_iterations; ++it) {
     // Pairing distance shrinks geometrically over the first iterations.
     const double frac = std::min(1.0, it / 8.0);
-    const double max_d = o.max_correspondence_m *
-                         std::pow(o.final_correspondence_m / o.max_correspondence_m, frac);
+    const double max_d =
+        o.max_correspondence_m * std::pow(o.final_correspondence_m / o.max_correspondence_m, frac);
     const double c = std::cos(T.theta), s = std::sin(T.theta);
     H.setZero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
@@ -113,7 +180,8 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
       if (j < 0) continue;
       const Eigen::Vector2d& n = reference[j].n;
       const double e = n.dot(w - reference[j].p);
-      const Eigen::Vector3d J(n.x(), n.y(), n.x() * (-s * q.x() - c * q.y()) + n.y() * (c * q.x() - s * q.y()));
+      const Eigen::Vector3d J(n.x(), n.y(),
+                              n.x() * (-s * q.x() - c * q.y()) + n.y() * (c * q.x() - s * q.y()));
       // Huber weight at 2 x the final pairing distance / 4 keeps outliers from dominating.
       const double k = 0.5 * o.final_correspondence_m;
       const double wgt = std::abs(e) <= k ? 1.0 : k / std::abs(e);
@@ -124,7 +192,14 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
     }
     r.iterations = it + 1;
     if (pairs < o.min_points) break;
-    const Eigen::Vector3d delta = -(H + 1e-9 * Eigen::Matrix3d::Identity()).ldlt().solve(g);
+    // Once the pairing distance is final, steps only along the directions the scene constrains
+    // (the rest stays where the coarse iterations left it instead of drifting on normal noise;
+    // icp.hpp). The coarse iterations move freely: far from the solution the Hessian of wrong
+    // pairs says little about the scene.
+    const Eigen::Matrix3d P = frac >= 1.0
+                                  ? WellConstrainedProjector(H, length_m, o.degeneracy_ratio)
+                                  : Eigen::Matrix3d::Identity();
+    const Eigen::Vector3d delta = P * (-(H + 1e-9 * Eigen::Matrix3d::Identity()).ldlt().solve(g));
     if (!delta.allFinite()) break;
     T = fl::Pose2(T.x + delta.x(), T.y + delta.y(), fl::WrapAngle(T.theta + delta.z()));
     if (frac >= 1.0 && delta.head<2>().norm() < 1e-5 && std::abs(delta.z()) < 1e-5) {
@@ -137,22 +212,43 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
   r.converged = converged;
   r.rms = pairs > 0 ? std::sqrt(sum_sq / pairs) : 0.0;
   r.inlier_fraction = static_cast<double>(pairs) / static_cast<double>(query.size());
-  // Information at the solution (unweighted Hessian, as the Gaussian fit supports it).
+  // Covariance at the solution (icp.hpp): unweighted Hessian, residual variance, lag-1
+  // correlation of the residuals of consecutive query beams.
   {
     const double c = std::cos(T.theta), s = std::sin(T.theta);
     Eigen::Matrix3d Hs = Eigen::Matrix3d::Zero();
-    for (const Eigen::Vector2d& q : query) {
+    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+    double e2 = 0.0, e_lag = 0.0, length_sq = 0.0;
+    int n = 0, prev_index = -2;
+    double prev_e = 0.0;
+    for (size_t i = 0; i < query.size(); ++i) {
+      const Eigen::Vector2d& q = query[i];
       const Eigen::Vector2d w(T.x + c * q.x() - s * q.y(), T.y + s * q.x() + c * q.y());
       const int j = hash.Nearest(w, o.final_correspondence_m);
       if (j < 0) continue;
-      const Eigen::Vector2d& n = reference[j].n;
-      const Eigen::Vector3d J(n.x(), n.y(), n.x() * (-s * q.x() - c * q.y()) + n.y() * (c * q.x() - s * q.y()));
+      const Eigen::Vector2d& nj = reference[j].n;
+      const double e = nj.dot(w - reference[j].p);
+      const Eigen::Vector3d J(nj.x(), nj.y(),
+                              nj.x() * (-s * q.x() - c * q.y()) + nj.y() * (c * q.x() - s * q.y()));
       Hs.noalias() += J * J.transpose();
+      M.noalias() += (e * e) * J * J.transpose();
+      e2 += e * e;
+      if (prev_index == static_cast<int>(i) - 1) e_lag += e * prev_e;
+      prev_index = static_cast<int>(i);
+      prev_e = e;
+      length_sq += q.squaredNorm();
+      ++n;
     }
-    r.information = Hs / (o.sigma * o.sigma);
+    r.hessian = Hs;
+    r.sigma = n > 3 ? std::sqrt(e2 / (n - 3)) : o.max_rms;
+    r.correlation = e2 > 0.0 ? e_lag / e2 : 0.0;
+    r.degenerate_dims =
+        IcpCovariance(Hs, M, n, r.correlation, n > 0 ? std::sqrt(length_sq / n) : 1.0, o,
+                      &r.covariance, &r.information);
   }
   if (pairs < o.min_points) {
-    r.failure = "only " + std::to_string(pairs) + " point pairs (need " + std::to_string(o.min_points) + ")";
+    r.failure = "only " + std::to_string(pairs) + " point pairs (need " +
+                std::to_string(o.min_points) + ")";
   } else if (r.inlier_fraction < o.min_inlier_fraction) {
     r.failure = "inlier fraction " + std::to_string(r.inlier_fraction) + " below " +
                 std::to_string(o.min_inlier_fraction);

@@ -24,10 +24,10 @@ Status NonNegative(const char* key, double v) {
   }
   return Status::Ok();
 }
-#define FL_RETURN_IF_ERROR(expr)  \
-  do {                            \
-    const Status _s = (expr);     \
-    if (!_s.ok()) return _s;      \
+#define FL_RETURN_IF_ERROR(expr) \
+  do {                           \
+    const Status _s = (expr);    \
+    if (!_s.ok()) return _s;     \
   } while (0)
 }  // namespace
 
@@ -47,8 +47,9 @@ Status GridOptions::Validate() const {
   }
   FL_RETURN_IF_ERROR(NonNegative("grid.log_odds_occupied", log_odds_occupied));
   if (!(log_odds_free < log_odds_occupied) || !(log_odds_free > -log_odds_clamp)) {
-    return Status::Error("grid.log_odds_free must be below grid.log_odds_occupied and above "
-                         "-grid.log_odds_clamp (e.g. 0.0)");
+    return Status::Error(
+        "grid.log_odds_free must be below grid.log_odds_occupied and above "
+        "-grid.log_odds_clamp (e.g. 0.0)");
   }
   if (free_space_beam_step < 1) return Status::Error("grid.free_space_beam_step must be >= 1");
   if (free_space_margin < 0 || free_space_margin > 10) {
@@ -81,6 +82,12 @@ Status MatcherOptions::Validate() const {
   }
   FL_RETURN_IF_ERROR(Positive("matcher.max_correction_m", max_correction_m));
   FL_RETURN_IF_ERROR(Positive("matcher.max_correction_rad", max_correction_rad));
+  FL_RETURN_IF_ERROR(NonNegative("matcher.unexplored_margin", unexplored_margin));
+  if (!(degeneracy_ratio >= 0.0 && degeneracy_ratio < 1.0)) {
+    return Status::Error(
+        "matcher.degeneracy_ratio must be in [0, 1) (0 turns the degeneracy "
+        "treatment off; 0.1 is the default)");
+  }
   return Status::Ok();
 }
 
@@ -91,7 +98,20 @@ Status IcpOptions::Validate() const {
   if (final_correspondence_m > max_correspondence_m) {
     return Status::Error("icp.final_correspondence_m must be <= icp.max_correspondence_m");
   }
-  FL_RETURN_IF_ERROR(Positive("icp.sigma", sigma));
+  FL_RETURN_IF_ERROR(Positive("icp.normal_radius", normal_radius));
+  if (!(normal_max_eigen_ratio > 0.0 && normal_max_eigen_ratio <= 1.0)) {
+    return Status::Error("icp.normal_max_eigen_ratio must be in (0, 1]");
+  }
+  FL_RETURN_IF_ERROR(Positive("icp.min_sigma", min_sigma));
+  FL_RETURN_IF_ERROR(Positive("icp.floor_sigma_xy", floor_sigma_xy));
+  FL_RETURN_IF_ERROR(Positive("icp.floor_sigma_theta", floor_sigma_theta));
+  FL_RETURN_IF_ERROR(Positive("icp.max_sigma_xy", max_sigma_xy));
+  if (!(degeneracy_ratio >= 0.0 && degeneracy_ratio < 1.0)) {
+    return Status::Error("icp.degeneracy_ratio must be in [0, 1) (0.02 is the default)");
+  }
+  if (max_sigma_xy <= floor_sigma_xy) {
+    return Status::Error("icp.max_sigma_xy must be larger than icp.floor_sigma_xy");
+  }
   if (min_points < 3) return Status::Error("icp.min_points must be >= 3");
   if (!(min_inlier_fraction >= 0.0 && min_inlier_fraction <= 1.0)) {
     return Status::Error("icp.min_inlier_fraction must be in [0, 1]");
@@ -101,6 +121,7 @@ Status IcpOptions::Validate() const {
 }
 
 Status GraphOptions::Validate() const {
+  FL_RETURN_IF_ERROR(NonNegative("graph.edge_sigma", edge_sigma));
   FL_RETURN_IF_ERROR(Positive("graph.keyframe_distance", keyframe_distance));
   FL_RETURN_IF_ERROR(Positive("graph.keyframe_angle", keyframe_angle));
   FL_RETURN_IF_ERROR(Positive("graph.loop_search_radius", loop_search_radius));
@@ -128,7 +149,8 @@ Status RbpfSlamOptions::Validate() const {
   }
   FL_RETURN_IF_ERROR(NonNegative("linear_update", linear_update));
   FL_RETURN_IF_ERROR(NonNegative("angular_update", angular_update));
-  if (!std::isfinite(base_laser_x) || !std::isfinite(base_laser_y) || !std::isfinite(base_laser_yaw)) {
+  if (!std::isfinite(base_laser_x) || !std::isfinite(base_laser_y) ||
+      !std::isfinite(base_laser_yaw)) {
     return Status::Error("base_laser_x/y/yaw must be finite");
   }
   FL_RETURN_IF_ERROR(grid.Validate());

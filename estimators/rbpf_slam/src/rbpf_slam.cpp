@@ -1,5 +1,6 @@
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -14,9 +15,7 @@ namespace fl::rbpf {
 namespace {
 // Weak information for a sequential graph edge when ICP failed (keeps the graph connected):
 // σ = 0.1 m, 0.05 rad.
-Eigen::Matrix3d WeakInformation() {
-  return Eigen::Vector3d(100.0, 100.0, 400.0).asDiagonal();
-}
+Eigen::Matrix3d WeakInformation() { return Eigen::Vector3d(100.0, 100.0, 400.0).asDiagonal(); }
 }  // namespace
 
 RbpfSlam::RbpfSlam(const RbpfSlamOptions& options)
@@ -109,7 +108,8 @@ void RbpfSlam::ConvertScan(const LaserScan& scan, ScanResult* result) {
   result->valid_beams = static_cast<int>(hits_base_.size());
 }
 
-fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, ScanResult* result) {
+fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
+                             ScanResult* result) {
   ScanResult local;
   ScanResult* res = result ? result : &local;
   *res = ScanResult();
@@ -120,7 +120,8 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, 
                          " does not come after the previous one (" + std::to_string(last_utime_) +
                          "); dropped");
   }
-  if (!std::isfinite(odom_pose.x) || !std::isfinite(odom_pose.y) || !std::isfinite(odom_pose.theta)) {
+  if (!std::isfinite(odom_pose.x) || !std::isfinite(odom_pose.y) ||
+      !std::isfinite(odom_pose.theta)) {
     ++stats_.rejected_bad_scan;
     return Status::Error("odometry pose at utime " + std::to_string(scan.utime) +
                          " is not finite; scan dropped");
@@ -219,6 +220,7 @@ void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res)
     const fl::Pose2 predicted = p.pose * noisy;
     const MatchResult mr = MatchScan(p.map, match_base_, predicted, mo);
     if (!mr.ok) ++stats_.match_failures;
+    if (mr.degenerate_dims > 0) ++stats_.degenerate_matches;
     p.pose = mr.T_world_base;
     p.log_w += mr.log_likelihood / opt_.matcher.likelihood_gain;
   }
@@ -248,7 +250,8 @@ void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res)
     for (size_t i = 0; i < parents.size(); ++i) {
       next.push_back(particles_[parents[i]]);
       next.back().log_w = 0.0;
-      if (parents[i] == best_ && first_child[best_] == static_cast<int>(i)) new_best = static_cast<int>(i);
+      if (parents[i] == best_ && first_child[best_] == static_cast<int>(i))
+        new_best = static_cast<int>(i);
     }
     particles_ = std::move(next);
     best_ = new_best;
@@ -277,7 +280,8 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   Keyframe kf;
   kf.utime = utime;
   kf.points_base = hits_base_;
-  kf.normals_base = ComputeNormals(kf.points_base);
+  kf.normals_base =
+      ComputeNormals(kf.points_base, opt_.icp.normal_radius, opt_.icp.normal_max_eigen_ratio);
   kf.path_length = path_length_;
   keyframes_.push_back(std::move(kf));
   const int j = graph_.AddNode(pose);
@@ -297,7 +301,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
     const fl::Pose2 jump = prior.between(icp.T_ref_query);
     if (icp.ok && std::hypot(jump.x, jump.y) < 0.5 && std::abs(jump.theta) < 0.3) {
       edge.T_i_j = icp.T_ref_query;
-      edge.information = icp.information;
+      edge.information = GraphEdgeInformation(icp);
       KeyframeFactor f;
       f.keyframe_i = i;
       f.keyframe_j = j;
@@ -314,6 +318,17 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   }
   graph_.AddEdge(edge);
   if (opt_.graph.enabled) SearchLoopClosure(j, res);
+}
+
+Eigen::Matrix3d RbpfSlam::GraphEdgeInformation(const IcpResult& icp) const {
+  const double s = opt_.graph.edge_sigma;
+  if (s <= 0.0) return icp.information;
+  // H/σ² may be singular along a corridor: keep it positive definite with the calibrated
+  // information's smallest eigenvalue.
+  Eigen::Matrix3d info = icp.hessian / (s * s);
+  info.diagonal().array() +=
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(icp.information).eigenvalues()(0);
+  return info;
 }
 
 void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
@@ -359,8 +374,20 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   edge.i = cand;
   edge.j = j;
   edge.T_i_j = icp.T_ref_query;
-  edge.information = icp.information;
-  edge.huber_scale = g.loop_huber_m > 0 ? g.loop_huber_m / opt_.icp.sigma : 0.0;
+  edge.information = GraphEdgeInformation(icp);
+  // Huber on the whitened residual: loop_huber_m in units of edge_sigma (as the internal edges
+  // are weighted); with the calibrated information, at loop_huber_m along the best-known
+  // translation.
+  if (g.loop_huber_m <= 0.0) {
+    edge.huber_scale = 0.0;
+  } else if (g.edge_sigma > 0.0) {
+    edge.huber_scale = g.loop_huber_m / g.edge_sigma;
+  } else {
+    const double info_xy_max =
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(edge.information.topLeftCorner<2, 2>())
+            .eigenvalues()(1);
+    edge.huber_scale = std::max(1.0, g.loop_huber_m * std::sqrt(info_xy_max));
+  }
   graph_.AddEdge(edge);
   const int edge_index = graph_.num_edges() - 1;
   ++graph_loop_edges_;

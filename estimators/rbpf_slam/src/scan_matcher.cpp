@@ -1,9 +1,24 @@
 #include "fusionloc/rbpf_slam/scan_matcher.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <cmath>
 
 namespace fl::rbpf {
+
+namespace {
+// Whether a scan point (base frame p, world w) lies in observed space: its cell, or the cell
+// `margin` back along its beam (approximated from the base origin), was observed.
+inline bool Observed(const TiledGrid& grid, const Eigen::Vector2d& p, const Eigen::Vector2d& w,
+                     double c, double s, const MatcherOptions& o) {
+  if (!o.skip_unexplored || grid.IsKnownAt(w)) return true;
+  const double r = p.norm();
+  if (o.unexplored_margin <= 0.0 || r <= o.unexplored_margin) return o.unexplored_margin > 0.0;
+  const double k = o.unexplored_margin / r;  // step back by margin along the beam
+  const Eigen::Vector2d back(c * p.x() - s * p.y(), s * p.x() + c * p.y());
+  return grid.IsKnownAt(w - k * back);
+}
+}  // namespace
 
 double ScanLogLikelihood(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& points_base,
                          const fl::Pose2& T, const MatcherOptions& o, int* inliers) {
@@ -11,29 +26,62 @@ double ScanLogLikelihood(const TiledGrid& grid, const std::vector<Eigen::Vector2
   const double inv2s2 = 1.0 / (2.0 * o.sigma * o.sigma);
   const double dmax = grid.field_radius_cells() * grid.resolution() * 0.999;
   double ll = 0.0;
-  int n_in = 0;
+  int n_in = 0, n_known = 0;
   for (const Eigen::Vector2d& p : points_base) {
     const Eigen::Vector2d w(T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y());
+    if (!Observed(grid, p, w, c, s, o)) continue;
+    ++n_known;
     const double d = grid.Distance(w);
     if (d < dmax) ++n_in;
     ll += std::log(o.z_hit * std::exp(-d * d * inv2s2) + o.z_rand);
   }
   if (inliers) *inliers = n_in;
-  return ll;
+  const double n = static_cast<double>(points_base.size());
+  if (n_known == 0) {
+    const double d = grid.Distance(Eigen::Vector2d(1e9, 1e9));  // saturated
+    return n * std::log(o.z_hit * std::exp(-d * d * inv2s2) + o.z_rand);
+  }
+  return ll * n / static_cast<double>(n_known);
 }
 
 namespace {
-// Sum of squared (saturated) distances, the matcher's cost.
-double Cost(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts, const fl::Pose2& T) {
+// Sum of squared (saturated) distances, the matcher's cost, over the points in `use`.
+double Cost(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
+            const std::vector<uint8_t>& use, const fl::Pose2& T) {
   const double c = std::cos(T.theta), s = std::sin(T.theta);
   double cost = 0.0;
-  for (const Eigen::Vector2d& p : pts) {
+  for (size_t i = 0; i < pts.size(); ++i) {
+    if (!use[i]) continue;
+    const Eigen::Vector2d& p = pts[i];
     const double d = grid.Distance({T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y()});
     cost += d * d;
   }
   return cost;
 }
 }  // namespace
+
+Eigen::Matrix3d WellConstrainedProjector(const Eigen::Matrix3d& H, double length_m, double ratio,
+                                         int* degenerate_dims) {
+  if (degenerate_dims) *degenerate_dims = 0;
+  if (!(ratio > 0.0) || !(length_m > 0.0) || !H.allFinite()) return Eigen::Matrix3d::Identity();
+  const Eigen::Vector3d s(1.0, 1.0, 1.0 / length_m);
+  const Eigen::Matrix3d Hs = s.asDiagonal() * H * s.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(0.5 * (Hs + Hs.transpose()));
+  const double lmax = es.eigenvalues()(2);
+  if (!(lmax > 0.0)) return Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d Pc = Eigen::Matrix3d::Zero();
+  int degenerate = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (es.eigenvalues()(k) < ratio * lmax) {
+      ++degenerate;
+    } else {
+      Pc += es.eigenvectors().col(k) * es.eigenvectors().col(k).transpose();
+    }
+  }
+  if (degenerate_dims) *degenerate_dims = degenerate;
+  if (degenerate == 0) return Eigen::Matrix3d::Identity();
+  return s.asDiagonal() * Pc * s.cwiseInverse().asDiagonal();
+}
 
 MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
                       const fl::Pose2& initial, const MatcherOptions& o) {
@@ -42,33 +90,53 @@ MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>&
   if (pts.empty()) return r;
   const double dmax = grid.field_radius_cells() * grid.resolution() * 0.999;
   fl::Pose2 T = initial;
-  double cost = Cost(grid, pts, T);
+  // Points in cells the map never observed are left out (fixed at the initial pose so that the
+  // cost compares like with like).
+  thread_local std::vector<uint8_t> use;
+  use.assign(pts.size(), 1);
+  {
+    const double c = std::cos(T.theta), s = std::sin(T.theta);
+    for (size_t i = 0; i < pts.size(); ++i) {
+      const Eigen::Vector2d& p = pts[i];
+      const Eigen::Vector2d w(T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y());
+      use[i] = Observed(grid, p, w, c, s, o) ? 1 : 0;
+    }
+  }
+  double cost = Cost(grid, pts, use, T);
   double lambda = 1e-3;
+  double length_sq = 0.0;
+  for (const Eigen::Vector2d& p : pts) length_sq += p.squaredNorm();
+  const double length_m = std::sqrt(length_sq / static_cast<double>(pts.size()));
+  Eigen::Matrix3d P = Eigen::Matrix3d::Identity();
   for (int it = 0; it < o.max_iterations; ++it) {
     const double c = std::cos(T.theta), s = std::sin(T.theta);
     Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     int n = 0;
-    for (const Eigen::Vector2d& p : pts) {
+    for (size_t i = 0; i < pts.size(); ++i) {
+      if (!use[i]) continue;
+      const Eigen::Vector2d& p = pts[i];
       const Eigen::Vector2d w(T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y());
       Eigen::Vector2d grad;
       const double d = grid.Distance(w, &grad);
       if (d >= dmax) continue;
-      const Eigen::Vector3d J(grad.x(), grad.y(),
-                              grad.x() * (-s * p.x() - c * p.y()) + grad.y() * (c * p.x() - s * p.y()));
+      const Eigen::Vector3d J(
+          grad.x(), grad.y(),
+          grad.x() * (-s * p.x() - c * p.y()) + grad.y() * (c * p.x() - s * p.y()));
       H.noalias() += J * J.transpose();
       g.noalias() += J * d;
       ++n;
     }
     if (n < 3) break;
+    if (it == 0) P = WellConstrainedProjector(H, length_m, o.degeneracy_ratio, &r.degenerate_dims);
     bool improved = false;
     for (int tries = 0; tries < 6 && !improved; ++tries) {
       Eigen::Matrix3d A = H;
       A.diagonal() += lambda * (H.diagonal().array() + 1e-6).matrix();
-      const Eigen::Vector3d delta = -A.ldlt().solve(g);
+      const Eigen::Vector3d delta = P * (-A.ldlt().solve(g));
       if (!delta.allFinite()) break;
       const fl::Pose2 T_new(T.x + delta.x(), T.y + delta.y(), fl::WrapAngle(T.theta + delta.z()));
-      const double cost_new = Cost(grid, pts, T_new);
+      const double cost_new = Cost(grid, pts, use, T_new);
       if (cost_new < cost) {
         const bool small = delta.head<2>().norm() < 1e-4 && std::abs(delta.z()) < 1e-4;
         T = T_new;

@@ -1,12 +1,27 @@
 // Point-to-line ICP between 2D scans (keyframe factors and loop-closure verification).
 //
-// Finds T_ref_query minimising Σ_i ( n_jᵀ (R q_i + t − r_j) )² over pairs (q_i query point,
-// r_j nearest reference point with unit normal n_j) closer than a correspondence distance that
-// shrinks from max_correspondence_m to final_correspondence_m. At convergence the information
-// of (x, y, θ) is the Gauss-Newton Hessian  Ω = Σ J_iᵀ J_i / σ²,
-//   J_i = [ n_jᵀ , n_jᵀ R'(θ) q_i ],
-// with σ = IcpOptions::sigma (the point-to-line noise), i.e. the inverse of the covariance
-// the fit supports; directions the scene does not constrain (a corridor) get little information.
+// Finds T_ref_query minimising Σ_i e_i², e_i = n_jᵀ (R q_i + t − r_j), over pairs (q_i query
+// point, r_j nearest reference point with unit normal n_j) closer than a correspondence distance
+// that shrinks from max_correspondence_m to final_correspondence_m (Huber-weighted steps).
+//
+// COVARIANCE of (x, y, θ) at the solution, calibrated from the fit itself:
+//   H  = Σ J_iᵀ J_i,  J_i = [ n_jᵀ , n_jᵀ R'(θ) q_i ]          (Gauss-Newton Hessian)
+//   M  = n/(n−3) Σ e_i² J_iᵀ J_i + min_sigma² H                  (residual-weighted: range noise
+//        of both scans, normal and discretisation errors at this sensor; each pair with its own
+//        residual, since noise depends on range and incidence: a beam grazing a wall has a
+//        small point-to-line error, one hitting it square the full range noise)
+//   ρ  = Σ e_i e_{i+1} / Σ e_i² over pairs of consecutive beams  (lag-1 correlation: neighbouring
+//        residuals share a reference line, a normal error, a wall's bias)
+//   κ  = (1 + ρ) / (1 − ρ), ρ clamped to [0, 0.95]              (AR(1) variance inflation: the
+//        n residuals carry the information of n/κ independent ones)
+//   Σ  = κ H⁺ M H⁺ + diag(floor_xy², floor_xy², floor_θ²)       (the heteroscedasticity-robust
+//        "sandwich" covariance of least squares, plus a floor for errors no fit shows)
+// H⁺ is the inverse over the eigen-directions of H (in the scaled coordinates (x, y, L·θ), L =
+// RMS point range) whose eigenvalue is at least icp.degeneracy_ratio of the largest; the weaker
+// ones (a corridor's axis, where the only "information" comes from normal noise on featureless
+// walls) get the std max_sigma_xy (max_sigma_xy / L in heading). Every eigenvalue of Σ is finally
+// capped at that value, so Ω = Σ⁻¹ is positive definite and says "unknown" along directions the
+// scene does not constrain instead of trusting the initial guess there.
 #pragma once
 
 #include <Eigen/Core>
@@ -19,15 +34,30 @@
 
 namespace fl::rbpf {
 
-// Estimates normals of points ordered along a scan (from neighbours within `max_gap` metres);
-// points whose normal cannot be estimated are dropped.
+// Estimates normals of points ordered along a scan by a line fit (PCA) over the neighbours in
+// scan order within `radius` metres of the point, not crossing a gap between consecutive points
+// larger than `max_gap`; points with fewer than 3 points in the fit or whose scatter is not a
+// line (small / large eigenvalue > max_eigen_ratio) are dropped.
 std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& ordered_points,
+                                        double radius = 0.3, double max_eigen_ratio = 0.3,
                                         double max_gap = 0.3);
+
+// Σ and Ω = Σ⁻¹ as documented above from H = Σ JᵀJ, M = Σ e² JᵀJ over n pairs and the
+// residual correlation ρ; `length_m` is the scale L of the heading (RMS point range). Returns
+// the number of unconstrained directions of H.
+int IcpCovariance(const Eigen::Matrix3d& H, const Eigen::Matrix3d& M, int n, double correlation,
+                  double length_m, const IcpOptions& options, Eigen::Matrix3d* covariance,
+                  Eigen::Matrix3d* information);
 
 struct IcpResult {
   bool ok = false;               // converged and passed the quality checks
   fl::Pose2 T_ref_query;
-  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();  // (x, y, θ) of T_ref_query
+  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();  // (x, y, θ) of T_ref_query = Σ⁻¹
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();   // Σ (see above)
+  Eigen::Matrix3d hessian = Eigen::Matrix3d::Zero();      // H = Σ JᵀJ at the solution
+  double sigma = 0.0;            // [m] σ̂, the per-pair residual std used in Σ
+  double correlation = 0.0;      // [-] ρ, lag-1 correlation of the residuals
+  int degenerate_dims = 0;       // directions of H with (almost) no information
   double rms = 0.0;              // [m] point-to-line RMS over the final pairs
   double inlier_fraction = 0.0;  // [-] paired query points / query points
   int pairs = 0;

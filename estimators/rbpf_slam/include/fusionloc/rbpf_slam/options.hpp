@@ -81,6 +81,15 @@ struct MatcherOptions {
                                    //     to the odometry prediction
   double max_correction_m = 0.5;   // [m] a match moving the pose farther than this is rejected
   double max_correction_rad = 0.35;// [rad] same for heading
+  bool skip_unexplored = false;     // [-] end points in never-observed cells are left out of the
+                                   //     matching and scored at the scan's mean (scan_matcher.hpp)
+  double unexplored_margin = 0.2;  // [m] ... a point counts as observed if its cell or the cell
+                                   //     this far back along its beam was (noisy hits just
+                                   //     behind a wall or pillar)
+  double degeneracy_ratio = 0.0;   // [-] a direction of (x, y, θ·L) whose Hessian eigenvalue is
+                                   //     below this fraction of the largest is degenerate (a
+                                   //     corridor's axis): the matcher does not move the pose
+                                   //     along it, the motion model's sample stands (0 = off)
 
   template <class A>
   void Serialize(A* a) {
@@ -93,6 +102,9 @@ struct MatcherOptions {
     a->Visit("min_inlier_fraction", &min_inlier_fraction);
     a->Visit("max_correction_m", &max_correction_m);
     a->Visit("max_correction_rad", &max_correction_rad);
+    a->Visit("skip_unexplored", &skip_unexplored);
+    a->Visit("unexplored_margin", &unexplored_margin);
+    a->Visit("degeneracy_ratio", &degeneracy_ratio);
   }
   Status Validate() const;
 };
@@ -102,20 +114,39 @@ struct IcpOptions {
   int max_iterations = 30;            // [-]
   double max_correspondence_m = 0.5;  // [m] first-iteration pairing distance (shrinks to `final`)
   double final_correspondence_m = 0.15;  // [m]
-  double sigma = 0.03;                // [m] point-to-line noise used for the information JᵀJ/σ²
   int min_points = 40;                // [-] fewer matched points: ICP fails
   double min_inlier_fraction = 0.5;   // [-] fraction of query points matched at the end
   double max_rms = 0.05;              // [m] RMS point-to-line residual at convergence
+  double normal_radius = 0.3;         // [m] reference normals: line fit over the scan neighbours
+                                      //     within this distance of the point
+  double normal_max_eigen_ratio = 0.3;// [-] ... accepted if (small / large) scatter eigenvalue is
+                                      //     below this (rejects corners and clutter)
+  // Covariance of the result (icp.hpp explains the model): Σ = κ σ̂² H⁻¹ + Σ_floor.
+  double min_sigma = 0.005;           // [m] lower bound of the per-point residual std σ̂
+  double floor_sigma_xy = 0.015;      // [m] Σ_floor: error no fit can remove (map, timing)
+  double floor_sigma_theta = 0.0075;   // [rad]
+  double max_sigma_xy = 2.0;          // [m] cap of the std along unconstrained directions (keeps
+                                      //     the information positive definite for the fusion)
+  double degeneracy_ratio = 0.05;     // [-] eigen-directions of H (in (x, y, L·θ)) weaker than
+                                      //     this fraction of the strongest are unconstrained: the
+                                      //     information there comes from normal noise on a
+                                      //     featureless wall, not from structure (icp.hpp)
 
   template <class A>
   void Serialize(A* a) {
     a->Visit("max_iterations", &max_iterations);
     a->Visit("max_correspondence_m", &max_correspondence_m);
     a->Visit("final_correspondence_m", &final_correspondence_m);
-    a->Visit("sigma", &sigma);
     a->Visit("min_points", &min_points);
     a->Visit("min_inlier_fraction", &min_inlier_fraction);
     a->Visit("max_rms", &max_rms);
+    a->Visit("normal_radius", &normal_radius);
+    a->Visit("normal_max_eigen_ratio", &normal_max_eigen_ratio);
+    a->Visit("min_sigma", &min_sigma);
+    a->Visit("floor_sigma_xy", &floor_sigma_xy);
+    a->Visit("floor_sigma_theta", &floor_sigma_theta);
+    a->Visit("max_sigma_xy", &max_sigma_xy);
+    a->Visit("degeneracy_ratio", &degeneracy_ratio);
   }
   Status Validate() const;
 };
@@ -133,6 +164,11 @@ struct GraphOptions {
   double loop_huber_m = 0.1;           // [m] robust loss scale on loop-closure edges
   double loop_max_residual_m = 1.0;    // [m] after optimisation, a loop edge still off by more
   double loop_max_residual_rad = 0.3;  // [rad] than this is rejected as wrong and re-optimised
+  double edge_sigma = 0.03;            // [m] ICP edges of this internal graph weigh H/edge_sigma²
+                                       //     (the tuning the filter's feedback was built on);
+                                       //     0 = use the calibrated information published to
+                                       //     the fusion (icp.hpp). Published factors always
+                                       //     carry the calibrated one.
   int max_iterations = 50;             // [-] Levenberg-Marquardt iterations per optimisation
   bool feed_back = true;               // [-] rebuild the particle maps from the corrected keyframes
   double feedback_min_correction_m = 0.05;  // [m] ... when the newest keyframe moved this much
@@ -151,6 +187,7 @@ struct GraphOptions {
     a->Visit("loop_huber_m", &loop_huber_m);
     a->Visit("loop_max_residual_m", &loop_max_residual_m);
     a->Visit("loop_max_residual_rad", &loop_max_residual_rad);
+    a->Visit("edge_sigma", &edge_sigma);
     a->Visit("max_iterations", &max_iterations);
     a->Visit("feed_back", &feed_back);
     a->Visit("feedback_min_correction_m", &feedback_min_correction_m);

@@ -53,6 +53,7 @@ struct RbpfSlamStats {
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates that fell back to odometry
+  int64_t degenerate_matches = 0;       // particle updates with a degenerate direction (corridor)
   int64_t keyframes = 0;
   int64_t icp_failures = 0;             // sequential keyframe ICP that failed verification
   int64_t loop_candidates = 0;
@@ -117,6 +118,7 @@ class RbpfSlam {
   void Integrate(Particle* p);
   void MaybeAddKeyframe(fl::Utime utime, ScanResult* result);
   void SearchLoopClosure(int kf, ScanResult* result);
+  Eigen::Matrix3d GraphEdgeInformation(const IcpResult& icp) const;
   bool OptimizeAndFeedBack(ScanResult* result);
   void RebuildMaps();
   int BestIndex() const;

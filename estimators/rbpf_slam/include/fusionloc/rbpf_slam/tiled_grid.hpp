@@ -66,6 +66,10 @@ class TiledGrid {
   float LogOdds(int cx, int cy) const;
   bool IsOccupied(int cx, int cy) const;
   bool IsKnown(int cx, int cy) const { return LogOdds(cx, cy) != 0.0f; }
+  // Whether the cell holding a world point was ever observed (hit or passed through).
+  bool IsKnownAt(const Eigen::Vector2d& p_world) const {
+    return IsKnown(CellX(p_world.x()), CellX(p_world.y()));
+  }
 
   // Adds log-odds to one cell (used by IntegrateScan; public for tests).
   void UpdateCell(int cx, int cy, int delta_scaled);
