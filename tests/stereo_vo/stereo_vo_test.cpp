@@ -217,6 +217,43 @@ TEST(StereoVoOptionsTest, ConfigFileLoadsAndDefaultsValidate) {
   EXPECT_TRUE(o.Validate().ok());
   EXPECT_THROW(fl::LoadYamlString<StereoVoOptions>("matching: {slope_treshold: 0.3}\n"),
                fl::ConfigError);
+  // The file states the defaults.
+  EXPECT_EQ(o.features.fast_threshold, StereoVoOptions().features.fast_threshold);
+  EXPECT_EQ(o.estimate_disparity_offset, StereoVoOptions().estimate_disparity_offset);
+  EXPECT_EQ(o.disparity_offset_drift_px, StereoVoOptions().disparity_offset_drift_px);
+}
+
+TEST(StereoVoOptionsTest, DisparityOffsetOptionsAreChecked) {
+  StereoVoOptions o;
+  o.refine.use_ceres = true;  // Ceres does not model the offset
+  fl::Status s = o.Validate();
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("estimate_disparity_offset"), std::string::npos) << s.message();
+  o.estimate_disparity_offset = false;
+  EXPECT_TRUE(o.Validate().ok()) << "Ceres without the offset is fine";
+  o = StereoVoOptions();
+  o.disparity_offset_initial_sd_px = 0;
+  EXPECT_FALSE(o.Validate().ok());
+  o = StereoVoOptions();
+  o.disparity_offset_initial_px = 3.0;  // beyond disparity_offset_max_px
+  EXPECT_FALSE(o.Validate().ok());
+  EXPECT_THROW(StereoVo(o, fl::test::stereo::TestCalibration()), std::invalid_argument);
+}
+
+TEST_F(StereoVoTest, OffsetStaysAtItsPriorWhenUnobservable) {
+  // A fronto-parallel plane moved sideways: one depth, no change of disparity, so the data
+  // cannot tell an offset from a depth and the estimate must stay near its start value.
+  StereoVoOptions opts;
+  opts.disparity_offset_initial_px = -0.2;
+  StereoVo vo(opts, calib_);
+  cv::Mat l, r;
+  for (int k = 0; k <= 4; ++k) {
+    Pair(k, &l, &r);
+    const StereoVoResult res = vo.AddStereoFrame(kT0 + k * kDt, l, r);
+    ASSERT_NE(res.state, TrackingState::kNotTracked) << res.message;
+    EXPECT_NEAR(res.stats.disparity_offset_px, -0.2, 0.1);
+    EXPECT_GT(res.stats.disparity_offset_sd_px, 0.0);
+  }
 }
 
 }  // namespace
