@@ -163,10 +163,11 @@ struct RefineResult {
   double offset_data_information = 0;
 };
 
-// Refines T_a_b on the inliers by minimizing the stereo reprojection error (u_left, v, u_right)
-// with Ceres. optimize_points: two-view bundle adjustment over the pose and every point (the
-// pose covariance is the Schur complement of the points); else the triangulated points are
-// fixed and reprojected both ways (p_a into b, p_b into a). `points_a` (optional) receives the
+// Refines T_a_b on the inliers by minimizing the stereo reprojection error (u_left, v, u_right).
+// optimize_points: two-view bundle adjustment over the pose and every point (the pose
+// covariance is the Schur complement of the points), by the analytic solver or, with
+// use_ceres, by Ceres; else (Ceres) the triangulated points are fixed and reprojected both ways
+// (p_a into b, p_b into a). `points_a` (optional) receives the
 // refined points in frame a.
 // `offset` (optional, analytic joint solver only): also estimate the disparity offset
 // increment (see OffsetPrior); the pose covariance is conditional on it (calibration-like).
