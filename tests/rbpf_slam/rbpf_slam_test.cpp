@@ -198,6 +198,18 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
   o.grid.field_max_distance = 2.0;
   EXPECT_NE(o.Validate().message().find("field_max_distance"), std::string::npos);
   EXPECT_THROW(RbpfSlam bad(o), std::invalid_argument);
+  o = RbpfSlamOptions();
+  o.icp.degeneracy_ratio = 1.5;
+  EXPECT_NE(o.Validate().message().find("icp.degeneracy_ratio"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.icp.max_sigma_xy = 0.001;
+  EXPECT_NE(o.Validate().message().find("icp.max_sigma_xy"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.matcher.degeneracy_ratio = -0.1;
+  EXPECT_NE(o.Validate().message().find("matcher.degeneracy_ratio"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.edge_sigma = -1.0;
+  EXPECT_NE(o.Validate().message().find("graph.edge_sigma"), std::string::npos);
 }
 
 TEST(RbpfSlamOptions, ConfigFileLoadsAndMatchesDefaults) {
