@@ -398,18 +398,23 @@ void FactorGraphFusion::AddChainFactor(int j) {
   const double sxy = options_.chain_sigma_xy_min + options_.chain_sigma_xy_per_m * dist;
   const double sth = options_.chain_sigma_theta_min +
                      options_.chain_sigma_theta_per_rad * std::fabs(motion.theta);
-  Factor chain;
-  chain.i = j - 1;
-  chain.j = j;
-  chain.T_i_j = motion;
-  chain.information =
-      Eigen::Vector3d(1 / (sxy * sxy), 1 / (sxy * sxy), 1 / (sth * sth)).asDiagonal();
-  chain.source = FactorSource::kLaser;
-  chain.cost.reset(Se2BetweenCost::Create(
-      ToVector(motion), Eigen::Vector3d(1 / sxy, 1 / sxy, 1 / sth).asDiagonal()));
-  chain.loss = robust_loss_;
   ++counters_.chain_factors;
-  AddGraphFactor(std::move(chain));
+  AddSequentialFactor(j, motion, sxy, sth, FactorSource::kLaser, robust_loss_);
+}
+
+void FactorGraphFusion::AddSequentialFactor(int j, const Pose2& motion, double sigma_xy,
+                                            double sigma_theta, FactorSource source,
+                                            std::shared_ptr<ceres::LossFunction> loss) {
+  const Eigen::Vector3d sqrt_info(1 / sigma_xy, 1 / sigma_xy, 1 / sigma_theta);
+  Factor factor;
+  factor.i = j - 1;
+  factor.j = j;
+  factor.T_i_j = motion;
+  factor.information = sqrt_info.cwiseAbs2().asDiagonal();
+  factor.source = source;
+  factor.cost.reset(Se2BetweenCost::Create(ToVector(motion), sqrt_info.asDiagonal()));
+  factor.loss = std::move(loss);
+  AddGraphFactor(std::move(factor));
 }
 
 Status FactorGraphFusion::AddOdometry(Utime utime, const Pose2& T_odom_base) {
@@ -482,17 +487,8 @@ void FactorGraphFusion::AddOdometryFactors() {
     const double sth = options_.odom_sigma_theta_min +
                        options_.odom_sigma_theta_per_rad * std::fabs(motion.theta) +
                        options_.odom_sigma_theta_per_m * dist;
-    Factor factor;
-    factor.i = j - 1;
-    factor.j = j;
-    factor.T_i_j = motion;
-    factor.information =
-        Eigen::Vector3d(1 / (sxy * sxy), 1 / (sxy * sxy), 1 / (sth * sth)).asDiagonal();
-    factor.source = FactorSource::kWheelOdometry;
-    factor.cost.reset(Se2BetweenCost::Create(
-        ToVector(motion), Eigen::Vector3d(1 / sxy, 1 / sxy, 1 / sth).asDiagonal()));
     ++counters_.odometry_factors;
-    AddGraphFactor(std::move(factor));
+    AddSequentialFactor(j, motion, sxy, sth, FactorSource::kWheelOdometry, nullptr);
   }
 }
 

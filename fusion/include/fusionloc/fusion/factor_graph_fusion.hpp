@@ -307,6 +307,9 @@ class FactorGraphFusion {
   void AttachPendingFactors();
   void AddOdometryFactors();
   void AddChainFactor(int j);  // between nodes j-1 and j, from their RBPF poses
+  // Between-factor (j-1, j) with a diagonal noise model.
+  void AddSequentialFactor(int j, const Pose2& motion, double sigma_xy, double sigma_theta,
+                           FactorSource source, std::shared_ptr<ceres::LossFunction> loss);
   bool OdometryAt(Utime t, Pose2* T_odom_base) const;
   SolveSummary SolveWindow(int first_node);
   // Nodes (from `first` on) that no factor touches are placed by the RBPF's relative motion
