@@ -89,11 +89,11 @@ TEST(ProcmanSupervisor, AProcessIgnoringSigtermIsKilledAfterTheTimeout) {
   LaunchFile l;
   l.stop_timeout_s = 0.3;
   l.end_grace_s = 0.0;
-  ProcessSpec stubborn = Proc("stubborn", "sh -c \"trap '' TERM; while true; do sleep 0.05; done\"");
+  ProcessSpec term_ignorer = Proc("term_ignorer", "sh -c \"trap '' TERM; while true; do sleep 0.05; done\"");
   ProcessSpec end = Proc("end", "true");
   end.on_exit = "stop_all";
   end.start_delay_s = 0.2;
-  l.processes = {stubborn, end};
+  l.processes = {term_ignorer, end};
   Supervisor s(l, Quiet(dir.path()));
   EXPECT_TRUE(s.Run().ok);
   EXPECT_EQ(s.statuses()[0].state, ProcessState::kStopped);
