@@ -20,9 +20,14 @@ Status OptimizePoseGraph(G2oGraph* graph, const PoseGraphSolveOptions& options,
                          PoseGraphResult* result) {
   if (graph->num_poses() == 0) return Status::Error("pose graph has no vertices");
   const auto t0 = std::chrono::steady_clock::now();
-  ceres::Problem problem;
+  // Declared before the problem, which borrows them (no leak on an early error return).
+  Pose2Manifold pose2_manifold;
+  ceres::EigenQuaternionManifold quaternion_manifold;
+  ceres::Problem::Options problem_options;
+  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
   if (!graph->is_3d()) {
-    auto* manifold = new Pose2Manifold;  // owned by the problem
+    ceres::Manifold* manifold = &pose2_manifold;
     for (size_t k = 0; k < graph->edges2.size(); ++k) {
       const G2oEdge2& e = graph->edges2[k];
       Eigen::Matrix3d sqrt_info;
@@ -38,10 +43,8 @@ Status OptimizePoseGraph(G2oGraph* graph, const PoseGraphSolveOptions& options,
     }
     double* first = graph->poses2.begin()->second.data();
     if (problem.HasParameterBlock(first)) problem.SetParameterBlockConstant(first);
-    // The manifold must outlive the problem even if no block uses it.
-    if (problem.NumParameterBlocks() == 0) delete manifold;
   } else {
-    auto* manifold = new ceres::EigenQuaternionManifold;
+    ceres::Manifold* manifold = &quaternion_manifold;
     for (size_t k = 0; k < graph->edges3.size(); ++k) {
       const G2oEdge3& e = graph->edges3[k];
       Eigen::Matrix<double, 6, 6> sqrt_info;
@@ -54,11 +57,9 @@ Status OptimizePoseGraph(G2oGraph* graph, const PoseGraphSolveOptions& options,
       problem.AddResidualBlock(Se3BetweenCost::Create(e.T_i_j.p, e.T_i_j.q, sqrt_info), nullptr,
                                a.p.data(), a.q.coeffs().data(), b.p.data(), b.q.coeffs().data());
     }
-    bool used = false;
     for (auto& [id, pose] : graph->poses3) {
       if (problem.HasParameterBlock(pose.q.coeffs().data())) {
         problem.SetManifold(pose.q.coeffs().data(), manifold);
-        used = true;
       }
     }
     G2oPose3& first = graph->poses3.begin()->second;
@@ -66,7 +67,6 @@ Status OptimizePoseGraph(G2oGraph* graph, const PoseGraphSolveOptions& options,
       problem.SetParameterBlockConstant(first.p.data());
       problem.SetParameterBlockConstant(first.q.coeffs().data());
     }
-    if (!used) delete manifold;
   }
 
   ceres::Solver::Options solver_options;
