@@ -125,6 +125,49 @@ TEST(RbpfSlam, SimulatedLoopIsClosed) {
   EXPECT_LT(max_err, 0.25);
 }
 
+TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
+  // Nearly exact odometry, but a one-particle filter whose motion model samples heading errors
+  // of ~0.3 rad per step and whose matcher may correct only 0.01 rad: the filter drifts away
+  // from the truth. ICP started from the odometry's relative pose fits the keyframes far better
+  // than ICP from the filter's, so the check overrules the filter and keeps it on track.
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  lo.odom_trans_noise = 0.002;
+  lo.odom_rot_noise = 0.001;
+  lo.odom_rot_bias = 0.0;
+  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  auto max_error = [&](bool check, RbpfSlamStats* stats) {
+    RbpfSlamOptions o = TestOptions(1);
+    o.motion.stt = 0.0;
+    o.motion.str = 1.2;  // [rad/m]: ~0.3 rad per 0.25 m step
+    o.matcher.max_correction_rad = 0.01;
+    o.graph.divergence_check = check;
+    o.graph.loop_search.enabled = false;
+    RbpfSlam slam(o);
+    for (size_t k = 0; k < run.utimes.size(); ++k) {
+      ScanResult r;
+      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    }
+    slam.Finish();
+    *stats = slam.stats();
+    const auto traj = slam.Trajectory();
+    double err = 0.0;
+    for (size_t k = 0; k < traj.size(); ++k) {
+      err = std::max(err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
+    }
+    return err;
+  };
+  RbpfSlamStats with_check, without_check;
+  const double err_with = max_error(true, &with_check);
+  const double err_without = max_error(false, &without_check);
+  EXPECT_EQ(without_check.divergences, 0);
+  EXPECT_GE(with_check.divergences, 3);
+  EXPECT_GT(err_without, 0.5) << "the crippled filter should drift";
+  EXPECT_LT(err_with, 0.25);
+  EXPECT_LT(err_with, 0.3 * err_without);
+}
+
 TEST(RbpfSlamBadInput, InvalidBeamsAreIgnored) {
   RbpfSlam slam(TestOptions(2));
   std::vector<float> r(181, 3.0f);
@@ -210,6 +253,22 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
   o = RbpfSlamOptions();
   o.graph.edge_sigma = -1.0;
   EXPECT_NE(o.Validate().message().find("graph.edge_sigma"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.loop_max_candidates = 0;
+  EXPECT_NE(o.Validate().message().find("graph.loop_max_candidates"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.loop_search.sigma = 0.0;
+  EXPECT_NE(o.Validate().message().find("graph.loop_search.sigma"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.divergence_min_gain = 1.5;
+  EXPECT_NE(o.Validate().message().find("graph.divergence_min_gain"), std::string::npos);
+  // Nested keys load from YAML; unknown nested keys are rejected.
+  const RbpfSlamOptions y = fl::LoadYamlString<RbpfSlamOptions>(
+      "graph:\n  loop_search:\n    linear_window: 1.5\n  divergence_check: false\n");
+  EXPECT_DOUBLE_EQ(y.graph.loop_search.linear_window, 1.5);
+  EXPECT_FALSE(y.graph.divergence_check);
+  EXPECT_THROW(fl::LoadYamlString<RbpfSlamOptions>("graph:\n  loop_search:\n    window: 1\n"),
+               fl::ConfigError);
 }
 
 TEST(RbpfSlamOptions, ConfigFileLoadsAndMatchesDefaults) {

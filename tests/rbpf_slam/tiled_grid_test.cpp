@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
+#include <vector>
 
 namespace fl::rbpf {
 namespace {
@@ -22,9 +24,9 @@ TEST(TiledGrid, DistanceFieldIsEuclideanDistanceToNearestObstacle) {
   MakeObstacle(&g, 10, 10);
   EXPECT_TRUE(g.IsOccupied(10, 10));
   EXPECT_DOUBLE_EQ(g.CellDistance(10, 10), 0.0);
-  EXPECT_NEAR(g.CellDistance(13, 14), 5 * 0.05, 1e-3);   // 3-4-5 triangle
+  EXPECT_NEAR(g.CellDistance(13, 14), 5 * 0.05, 1e-3);  // 3-4-5 triangle
   EXPECT_NEAR(g.CellDistance(10, 16), 6 * 0.05, 1e-3);
-  EXPECT_NEAR(g.CellDistance(10, 40), 0.4, 1e-9);          // saturated
+  EXPECT_NEAR(g.CellDistance(10, 40), 0.4, 1e-9);  // saturated
   // Interpolated lookup at world points: the centre of cell 10 is 0.525 m.
   EXPECT_NEAR(g.Distance({0.525, 0.525}), 0.0, 1e-9);
   EXPECT_NEAR(g.Distance({0.525 + 0.15, 0.525}), 0.15, 1e-3);
@@ -66,6 +68,42 @@ TEST(TiledGrid, IntegrateScanClearsFreeSpaceAndMarksHits) {
   EXPECT_FALSE(g.IsKnown(g.CellX(1.0), 5));
 }
 
+TEST(TiledGrid, BatchBuildEqualsScanByScanIntegration) {
+  // Scans from several origins over a few walls (hits that later get cleared, grazing rays,
+  // negative coordinates, several tiles); the batch field must equal the incremental one.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-4.0, 4.0);
+  TiledGrid one(Opts()), batch(Opts());
+  batch.BeginBatch();
+  for (int s = 0; s < 12; ++s) {
+    const Eigen::Vector2d origin(u(rng) * 0.5, u(rng) * 0.5);
+    std::vector<Eigen::Vector2d> ends;
+    std::vector<uint8_t> hit;
+    for (int k = 0; k < 180; ++k) {
+      const double a = 2.0 * M_PI * k / 180.0;
+      const double r = 2.0 + std::abs(u(rng)) * ((k + s) % 7 == 0 ? 1.0 : 0.1);
+      ends.push_back(origin + r * Eigen::Vector2d(std::cos(a), std::sin(a)));
+      hit.push_back(k % 11 == 0 ? 0 : 1);
+    }
+    one.IntegrateScan(origin, ends, hit);
+    batch.IntegrateScan(origin, ends, hit);
+  }
+  batch.EndBatch();
+  int x0, y0, x1, y1;
+  ASSERT_TRUE(one.Bounds(&x0, &y0, &x1, &y1));
+  int obstacles = 0, freed = 0;
+  for (int y = y0 - 2; y < y1 + 2; ++y) {
+    for (int x = x0 - 2; x < x1 + 2; ++x) {
+      ASSERT_EQ(one.LogOdds(x, y), batch.LogOdds(x, y)) << x << "," << y;
+      ASSERT_EQ(one.CellDistance(x, y), batch.CellDistance(x, y)) << x << "," << y;
+      obstacles += one.IsOccupied(x, y) ? 1 : 0;
+      freed += (!one.IsOccupied(x, y) && one.LogOdds(x, y) > 0.0f) ? 1 : 0;
+    }
+  }
+  EXPECT_GT(obstacles, 500);
+  EXPECT_GT(freed, 0) << "the scans should also clear some earlier hits";
+}
+
 TEST(TiledGrid, CopyOnWriteCopiesOnlyTheTileWrittenTo) {
   TiledGrid a(Opts());
   MakeObstacle(&a, 0, 0);
@@ -76,7 +114,7 @@ TEST(TiledGrid, CopyOnWriteCopiesOnlyTheTileWrittenTo) {
   MakeObstacle(&b, 210, 5);  // far from tile borders: writes one tile only
   EXPECT_NE(a.TileAddress(200, 0), b.TileAddress(200, 0));
   EXPECT_EQ(a.TileAddress(0, 0), b.TileAddress(0, 0));  // untouched tile still shared
-  EXPECT_FALSE(a.IsOccupied(210, 5));                    // the original is unchanged
+  EXPECT_FALSE(a.IsOccupied(210, 5));                   // the original is unchanged
   EXPECT_TRUE(b.IsOccupied(210, 5));
 }
 

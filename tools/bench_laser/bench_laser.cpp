@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <limits>
@@ -121,6 +122,12 @@ void WritePng(const fl::rbpf::TiledGrid& map, const fl::eval::Trajectory& est,
   cv::imwrite(path, img);
 }
 
+std::string Metres(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.3f", v);
+  return buf;
+}
+
 // Reference pose nearest in time to t (within max_dt), or false.
 bool ReferenceAt(const fl::eval::Trajectory& ref, fl::Utime t, fl::Utime max_dt, fl::Pose2* out) {
   auto it =
@@ -190,12 +197,15 @@ int main(int argc, char** argv) {
   std::string only;
   std::string png_dir = "out/bench/laser";
   int particles = 0;
-  uint64_t seed = 1;
+  std::string seeds_text = "1,2,3";
   cli.AddFlag("config", &config,
               "RBPF options YAML (default: built-in defaults = config/rbpf_slam.yaml)");
   cli.AddFlag("only", &only, "run only logs whose file name contains this text");
   cli.AddFlag("particles", &particles, "override the particle count (0 = from the options)");
-  cli.AddFlag("noise-seed", &seed, "seed of the synthetic odometry noise of corrected logs");
+  cli.AddFlag("seeds", &seeds_text,
+              "comma-separated run seeds: run s uses seed s for the synthetic odometry noise of "
+              "corrected logs and the filter seed (options) + 7*(s-1); with several seeds each "
+              "input also gets a '<name> mean' row averaging its runs");
   cli.AddFlag("png-dir", &png_dir, "folder for the map PNGs");
   std::string sim_worlds;
   std::string config_dir = "config";
@@ -216,6 +226,23 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (particles > 0) options.particles = particles;
+  std::vector<uint64_t> seeds;
+  for (size_t a = 0, b; a < seeds_text.size(); a = b + 1) {
+    b = seeds_text.find(',', a);
+    if (b == std::string::npos) b = seeds_text.size();
+    const std::string t = seeds_text.substr(a, b - a);
+    if (t.empty() || t.find_first_not_of("0123456789") != std::string::npos || t.size() > 9 ||
+        std::stoul(t) == 0) {
+      std::cerr << "fl-bench-laser: --seeds=" << seeds_text
+                << ": expected positive integers separated by commas, e.g. --seeds=1,2,3\n";
+      return 2;
+    }
+    seeds.push_back(std::stoul(t));
+  }
+  if (seeds.empty()) {
+    std::cerr << "fl-bench-laser: --seeds is empty; e.g. --seeds=1\n";
+    return 2;
+  }
 
   // Inputs: DATA/laser and (if different) the shared data folder's laser logs.
   std::vector<Input> inputs;
@@ -270,134 +297,170 @@ int main(int argc, char** argv) {
   fs::create_directories(tmp);
   int failures = 0;
   for (const Input& in : inputs) {
-    try {
-      fl::rbpf::RbpfSlamOptions run_options = options;
-      LogData data;
-      if (!in.sim_config.empty()) {
-        fl::Pose2 T_base_laser;
-        data = SimulateWorld(fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config), &T_base_laser);
-        run_options.base_laser_x = T_base_laser.x;
-        run_options.base_laser_y = T_base_laser.y;
-        run_options.base_laser_yaw = T_base_laser.theta;
-      } else {
-        fl::importers::CarmenOptions co;
-        co.seed = seed;
-        const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
-        if (!in.reference.empty()) co.noisy_odometry = "false";
-        // csail-corrected.log.gz printed its time stamps with 6 significant digits: take them from
-        // the raw log of the same run when it is there (matched by ranges).
-        const fs::path raw_csail = fs::path(in.log).parent_path() / "mit-csail.clf";
-        if (fs::path(in.log).filename() == "csail-corrected.log.gz" && fs::exists(raw_csail)) {
-          co.timestamps_from = raw_csail.string();
+    std::vector<fl::bench::Run> seed_runs;
+    for (const uint64_t seed : seeds) {
+      const std::string run_name =
+          seeds.size() > 1 ? in.name + "/s" + std::to_string(seed) : in.name;
+      try {
+        fl::rbpf::RbpfSlamOptions run_options = options;
+        run_options.seed = options.seed + 7 * static_cast<int>(seed - 1);
+        LogData data;
+        if (!in.sim_config.empty()) {
+          fl::Pose2 T_base_laser;
+          data = SimulateWorld(fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config), &T_base_laser);
+          run_options.base_laser_x = T_base_laser.x;
+          run_options.base_laser_y = T_base_laser.y;
+          run_options.base_laser_yaw = T_base_laser.theta;
+        } else {
+          fl::importers::CarmenOptions co;
+          co.seed = seed;
+          const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
+          if (!in.reference.empty()) co.noisy_odometry = "false";
+          // csail-corrected.log.gz printed its time stamps with 6 significant digits: take them
+          // from the raw log of the same run when it is there (matched by ranges).
+          const fs::path raw_csail = fs::path(in.log).parent_path() / "mit-csail.clf";
+          if (fs::path(in.log).filename() == "csail-corrected.log.gz" && fs::exists(raw_csail)) {
+            co.timestamps_from = raw_csail.string();
+          }
+          fl::importers::ConvertCarmen(co, in.log, lcm_log);
+          data = ReadLcm(lcm_log);
+          if (!in.reference.empty()) {
+            fl::importers::CarmenOptions ro;
+            ro.noisy_odometry = "true";
+            ro.timestamps_from = in.log;
+            const std::string ref_log = tmp + "/" + in.name + ".ref.lcmlog";
+            fl::importers::ConvertCarmen(ro, in.reference, ref_log);
+            data.ground_truth = ReadLcm(ref_log).ground_truth;
+          }
         }
-        fl::importers::ConvertCarmen(co, in.log, lcm_log);
-        data = ReadLcm(lcm_log);
-        if (!in.reference.empty()) {
-          fl::importers::CarmenOptions ro;
-          ro.noisy_odometry = "true";
-          ro.timestamps_from = in.log;
-          const std::string ref_log = tmp + "/" + in.name + ".ref.lcmlog";
-          fl::importers::ConvertCarmen(ro, in.reference, ref_log);
-          data.ground_truth = ReadLcm(ref_log).ground_truth;
-        }
-      }
-      if (data.ground_truth.size() < 3) throw std::runtime_error("fewer than 3 ground-truth poses");
+        if (data.ground_truth.size() < 3)
+          throw std::runtime_error("fewer than 3 ground-truth poses");
 
-      const fl::Utime max_dt = 20000;
-      fl::rbpf::RbpfSlam slam(run_options);
-      std::vector<double> ms_processed, ms_all, chi2_seq, chi2_loop;
-      int64_t skipped = 0;
-      fl::bench::Progress progress("[bench laser] " + in.name,
-                                   static_cast<int64_t>(data.scans.size()));
-      for (size_t i = 0; i < data.scans.size(); ++i) {
-        fl::Pose2 odom;
-        if (!data.odom.Lookup(data.scans[i].utime, &odom).ok()) {
-          ++skipped;
-          continue;
+        const fl::Utime max_dt = 20000;
+        fl::rbpf::RbpfSlam slam(run_options);
+        std::vector<double> ms_processed, ms_all, chi2_seq, chi2_loop;
+        int64_t skipped = 0;
+        fl::bench::Progress progress("[bench laser] " + run_name,
+                                     static_cast<int64_t>(data.scans.size()));
+        for (size_t i = 0; i < data.scans.size(); ++i) {
+          fl::Pose2 odom;
+          if (!data.odom.Lookup(data.scans[i].utime, &odom).ok()) {
+            ++skipped;
+            continue;
+          }
+          fl::rbpf::ScanResult r;
+          const auto t0 = std::chrono::steady_clock::now();
+          const fl::Status s = slam.AddScan(data.scans[i], odom, &r);
+          const double ms =
+              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                  .count();
+          if (!s.ok()) {
+            ++skipped;
+            continue;
+          }
+          ms_all.push_back(ms);
+          for (const fl::rbpf::KeyframeFactor& f : r.factors) {
+            const double c = FactorChi2(f, data.ground_truth, max_dt);
+            if (c >= 0) (f.is_loop_closure ? chi2_loop : chi2_seq).push_back(c);
+          }
+          if (r.processed) ms_processed.push_back(ms);
+          progress.Update(static_cast<int64_t>(i + 1));
         }
-        fl::rbpf::ScanResult r;
         const auto t0 = std::chrono::steady_clock::now();
-        const fl::Status s = slam.AddScan(data.scans[i], odom, &r);
-        const double ms =
+        slam.Finish();
+        const double finish_ms =
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                 .count();
-        if (!s.ok()) {
-          ++skipped;
-          continue;
-        }
-        ms_all.push_back(ms);
-        for (const fl::rbpf::KeyframeFactor& f : r.factors) {
-          const double c = FactorChi2(f, data.ground_truth, max_dt);
-          if (c >= 0) (f.is_loop_closure ? chi2_loop : chi2_seq).push_back(c);
-        }
-        if (r.processed) ms_processed.push_back(ms);
-        progress.Update(static_cast<int64_t>(i + 1));
-      }
-      const auto t0 = std::chrono::steady_clock::now();
-      slam.Finish();
-      const double finish_ms =
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      progress.Finish();
+        progress.Finish();
 
-      fl::eval::Trajectory est;
-      for (const auto& p : slam.Trajectory())
-        est.push_back({p.utime, p.T_world_base.ToIsometry3()});
-      const fl::eval::AteResult ate =
-          fl::eval::ComputeAte(est, data.ground_truth, fl::eval::Alignment::kSE2, max_dt);
-      const fl::eval::RpeResult rpe =
-          fl::eval::ComputeRpe(est, data.ground_truth, 1, fl::eval::DeltaUnit::kFrames, max_dt);
-      const fl::bench::Stats sp = fl::bench::ComputeStats(ms_processed);
-      const fl::bench::Stats sa = fl::bench::ComputeStats(ms_all);
-      fl::bench::Run run;
-      run.name = in.name;
-      run.input = in.log;
-      const auto& st = slam.stats();
-      run.Add("ate_rmse_m", ate.trans_m.rmse)
-          .Add("ate_rmse_deg", ate.rot_deg.rmse)
-          .Add("rpe_trans_m", rpe.trans_m.mean)
-          .Add("rpe_rot_deg", rpe.rot_deg.mean)
-          .Add("ms_per_item_mean", sa.mean)
-          .Add("ms_per_item_p95", sa.p95)
-          .Add("ms_per_processed_mean", sp.mean)
-          .Add("ms_per_processed_p95", sp.p95)
-          .Add("finish_ms", finish_ms)
-          .Add("items", static_cast<double>(ms_all.size()))
-          .Add("processed", static_cast<double>(st.processed))
-          .Add("matched_pairs", static_cast<double>(ate.trans_m.count))
-          .Add("loop_closures", static_cast<double>(st.loop_closures))
-          .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
-          .Add("resamples", static_cast<double>(st.resamples))
-          .Add("degenerate_pct",
-               100.0 * static_cast<double>(st.degenerate_matches) /
-                   std::max<double>(1.0, static_cast<double>(st.processed * options.particles)))
-          .Add("dropped", static_cast<double>(skipped))
-          .Add("factors", static_cast<double>(chi2_seq.size()))
-          .Add("factor_chi2_median",
-               chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).median)
-          .Add("factor_chi2_p95", chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).p95)
-          .Add("loop_factors", static_cast<double>(chi2_loop.size()))
-          .Add("loop_chi2_median",
-               chi2_loop.empty() ? -1.0 : fl::bench::ComputeStats(chi2_loop).median)
-          .Add("peak_rss_mb", fl::bench::PeakRssMb());
-      const std::string png = png_dir + "/" + in.name + ".png";
-      fl::eval::Trajectory ref_in_map;
-      const Eigen::Isometry3d T_est_ref = ate.T_ref_est.inverse();
-      for (const auto& p : ate.ref_matched)
-        ref_in_map.push_back({p.utime, T_est_ref * p.T_world_base});
-      WritePng(slam.BestMap(), est, ref_in_map, png);
-      if (dump) {
-        fl::eval::WriteTrajectoryTum(est, png_dir + "/" + in.name + ".est.tum");
-        fl::eval::WriteTrajectoryTum(data.ground_truth, png_dir + "/" + in.name + ".ref.tum");
+        fl::eval::Trajectory est;
+        for (const auto& p : slam.Trajectory())
+          est.push_back({p.utime, p.T_world_base.ToIsometry3()});
+        const fl::eval::AteResult ate =
+            fl::eval::ComputeAte(est, data.ground_truth, fl::eval::Alignment::kSE2, max_dt);
+        const fl::eval::RpeResult rpe =
+            fl::eval::ComputeRpe(est, data.ground_truth, 1, fl::eval::DeltaUnit::kFrames, max_dt);
+        const fl::bench::Stats sp = fl::bench::ComputeStats(ms_processed);
+        const fl::bench::Stats sa = fl::bench::ComputeStats(ms_all);
+        fl::bench::Run run;
+        run.name = run_name;
+        run.input = in.log;
+        const auto& st = slam.stats();
+        run.Add("ate_rmse_m", ate.trans_m.rmse)
+            .Add("ate_rmse_deg", ate.rot_deg.rmse)
+            .Add("rpe_trans_m", rpe.trans_m.mean)
+            .Add("rpe_rot_deg", rpe.rot_deg.mean)
+            .Add("ms_per_item_mean", sa.mean)
+            .Add("ms_per_item_p95", sa.p95)
+            .Add("ms_per_processed_mean", sp.mean)
+            .Add("ms_per_processed_p95", sp.p95)
+            .Add("finish_ms", finish_ms)
+            .Add("items", static_cast<double>(ms_all.size()))
+            .Add("processed", static_cast<double>(st.processed))
+            .Add("matched_pairs", static_cast<double>(ate.trans_m.count))
+            .Add("loop_candidates", static_cast<double>(st.loop_candidates))
+            .Add("loop_closures", static_cast<double>(st.loop_closures))
+            .Add("loop_rejections", static_cast<double>(st.loop_rejections))
+            .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
+          .Add("divergences", static_cast<double>(st.divergences))
+            .Add("resamples", static_cast<double>(st.resamples))
+            .Add("degenerate_pct",
+                 100.0 * static_cast<double>(st.degenerate_matches) /
+                     std::max<double>(1.0, static_cast<double>(st.processed * options.particles)))
+            .Add("dropped", static_cast<double>(skipped))
+            .Add("factors", static_cast<double>(chi2_seq.size()))
+            .Add("factor_chi2_median",
+                 chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).median)
+            .Add("factor_chi2_p95", chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).p95)
+            .Add("loop_factors", static_cast<double>(chi2_loop.size()))
+            .Add("loop_chi2_median",
+                 chi2_loop.empty() ? -1.0 : fl::bench::ComputeStats(chi2_loop).median)
+            .Add("peak_rss_mb", fl::bench::PeakRssMb());
+        const std::string file_stem =
+            seeds.size() > 1 ? in.name + "-s" + std::to_string(seed) : in.name;
+        const std::string png = png_dir + "/" + file_stem + ".png";
+        fl::eval::Trajectory ref_in_map;
+        const Eigen::Isometry3d T_est_ref = ate.T_ref_est.inverse();
+        for (const auto& p : ate.ref_matched)
+          ref_in_map.push_back({p.utime, T_est_ref * p.T_world_base});
+        WritePng(slam.BestMap(), est, ref_in_map, png);
+        if (dump) {
+          fl::eval::WriteTrajectoryTum(est, png_dir + "/" + file_stem + ".est.tum");
+          fl::eval::WriteTrajectoryTum(data.ground_truth, png_dir + "/" + file_stem + ".ref.tum");
+        }
+        run.note =
+            "png " + png + "; particles " + std::to_string(options.particles) +
+            "; factor_chi2 = e^T Omega e of the sequential ICP factors against the reference "
+            "(calibrated: median ~2.4), loop_chi2 the same for loop closures" +
+            "; ICP factors failed " + std::to_string(st.icp_failures) +
+            "; ms_per_item = every scan, ms_per_processed = scans the filter ran on";
+        seed_runs.push_back(run);
+        report.AddRun(run);
+      } catch (const std::exception& e) {
+        std::cerr << "fl-bench-laser: " << run_name << ": " << e.what() << "\n";
+        ++failures;
       }
-      run.note = "png " + png + "; particles " + std::to_string(options.particles) +
-                 "; factor_chi2 = e^T Omega e of the sequential ICP factors against the reference "
-                 "(calibrated: median ~2.4), loop_chi2 the same for loop closures" +
-                 "; ICP factors failed " + std::to_string(st.icp_failures) +
-                 "; ms_per_item = every scan, ms_per_processed = scans the filter ran on";
-      report.AddRun(run);
-    } catch (const std::exception& e) {
-      std::cerr << "fl-bench-laser: " << in.name << ": " << e.what() << "\n";
-      ++failures;
+    }
+    if (seed_runs.size() > 1) {
+      // Mean over the seeds (the filter's accuracy varies from seed to seed; one seed can mislead).
+      fl::bench::Run mean;
+      mean.name = in.name + " mean";
+      mean.input = in.log;
+      std::string per_seed;
+      double worst = 0.0;
+      for (const auto& [key, value] : seed_runs.front().metrics) {
+        double sum = 0.0;
+        for (const fl::bench::Run& r : seed_runs) sum += r.Get(key);
+        mean.Add(key, sum / static_cast<double>(seed_runs.size()));
+      }
+      for (const fl::bench::Run& r : seed_runs) {
+        const double a = r.Get("ate_rmse_m");
+        worst = std::max(worst, a);
+        per_seed += (per_seed.empty() ? "" : ", ") + Metres(a);
+      }
+      mean.note = "mean of " + std::to_string(seed_runs.size()) + " runs (seeds " + seeds_text +
+                  "); ATE per seed " + per_seed + " m, worst " + Metres(worst) + " m";
+      report.AddRun(mean);
     }
   }
   if (!std::getenv("FL_BENCH_KEEP_TMP")) fs::remove_all(tmp, ec);

@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "fusionloc/rbpf_slam/correlative_matcher.hpp"
 #include "fusionloc/rbpf_slam/scan_matcher.hpp"
 
 namespace fl::rbpf {
@@ -283,23 +284,60 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   kf.normals_base =
       ComputeNormals(kf.points_base, opt_.icp.normal_radius, opt_.icp.normal_max_eigen_ratio);
   kf.path_length = path_length_;
+  kf.odom = odom_;
   keyframes_.push_back(std::move(kf));
   const int j = graph_.AddNode(pose);
   ++stats_.keyframes;
   res->new_keyframe = true;
   if (j == 0) return;
   const int i = j - 1;
-  const fl::Pose2 prior = graph_.pose(i).between(pose);
+  fl::Pose2 prior = graph_.pose(i).between(pose);
   PoseGraphEdge edge;
   edge.i = i;
   edge.j = j;
   edge.T_i_j = prior;
   edge.information = WeakInformation();
   if (opt_.graph.enabled) {
-    const IcpResult icp =
+    IcpResult icp =
         AlignPointToLine(keyframes_[i].normals_base, keyframes_[j].points_base, prior, opt_.icp);
-    const fl::Pose2 jump = prior.between(icp.T_ref_query);
-    if (icp.ok && std::hypot(jump.x, jump.y) < 0.5 && std::abs(jump.theta) < 0.3) {
+    fl::Pose2 jump = prior.between(icp.T_ref_query);
+    bool icp_ok = icp.ok && std::hypot(jump.x, jump.y) < 0.5 && std::abs(jump.theta) < 0.3;
+    if (opt_.graph.divergence_check) {
+      // Did the filter lock onto a wrong match? ICP from the odometry's relative pose too.
+      const fl::Pose2 odom_rel = keyframes_[i].odom.between(keyframes_[j].odom);
+      const fl::Pose2 diff = prior.between(odom_rel);
+      if (std::hypot(diff.x, diff.y) > 0.05 || std::abs(diff.theta) > 0.03) {
+        const IcpResult alt = AlignPointToLine(keyframes_[i].normals_base,
+                                               keyframes_[j].points_base, odom_rel, opt_.icp);
+        const fl::Pose2 alt_jump = odom_rel.between(alt.T_ref_query);
+        const bool alt_ok =
+            alt.ok && std::hypot(alt_jump.x, alt_jump.y) < 0.5 && std::abs(alt_jump.theta) < 0.3;
+        // The better fit of the two starts; when it is the filter's, it must agree with the
+        // odometry's (two independent starts, one answer).
+        const bool use_alt =
+            !icp_ok || alt.inlier_fraction > icp.inlier_fraction + opt_.graph.divergence_min_gain;
+        const IcpResult& best = use_alt ? alt : icp;
+        const fl::Pose2 agree = alt.T_ref_query.between(best.T_ref_query);
+        const bool corroborated =
+            use_alt || (std::hypot(agree.x, agree.y) < 0.05 && std::abs(agree.theta) < 0.02);
+        const fl::Pose2 moved = prior.between(best.T_ref_query);
+        if (alt_ok && corroborated &&
+            (std::hypot(moved.x, moved.y) > 0.1 || std::abs(moved.theta) > 0.05)) {
+          // The filter diverged: move node j (and the particles) to where ICP puts it.
+          ++stats_.divergences;
+          const fl::Pose2 corrected = graph_.pose(i) * best.T_ref_query;
+          const fl::Pose2 T_corr = corrected * pose.inverse();
+          graph_.set_pose(j, corrected);
+          for (Particle& p : particles_) p.pose = T_corr * p.pose;
+          if (use_alt) icp = alt;
+          icp_ok = true;
+          prior = icp.T_ref_query;
+          RebuildMaps();
+          ++stats_.map_rebuilds;
+        }
+      }
+    }
+    if (icp_ok) {
       edge.T_i_j = icp.T_ref_query;
       edge.information = GraphEdgeInformation(icp);
       KeyframeFactor f;
@@ -334,19 +372,73 @@ Eigen::Matrix3d RbpfSlam::GraphEdgeInformation(const IcpResult& icp) const {
 void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   const GraphOptions& g = opt_.graph;
   const fl::Pose2 pj = graph_.pose(j);
-  int cand = -1;
-  double best_d = g.loop_search_radius;
+  // Candidates: keyframes at least loop_min_travel back along the path and within
+  // loop_search_radius in the graph, nearest first; at most loop_max_candidates, each outside the
+  // submaps of those already chosen (so two candidates are two different views of the place).
+  std::vector<std::pair<double, int>> near;
   for (int c = 0; c < j; ++c) {
     if (keyframes_[j].path_length - keyframes_[c].path_length < g.loop_min_travel) continue;
     const fl::Pose2 pc = graph_.pose(c);
     const double d = std::hypot(pc.x - pj.x, pc.y - pj.y);
-    if (d < best_d) {
-      best_d = d;
-      cand = c;
-    }
+    if (d < g.loop_search_radius) near.emplace_back(d, c);
   }
-  if (cand < 0) return;
-  ++stats_.loop_candidates;
+  std::sort(near.begin(), near.end());
+  std::vector<int> chosen;
+  for (const auto& [d, c] : near) {
+    if (static_cast<int>(chosen.size()) >= g.loop_max_candidates) break;
+    bool distinct = true;
+    for (int o : chosen) distinct = distinct && std::abs(o - c) > 2 * g.loop_submap_half_width;
+    if (distinct) chosen.push_back(c);
+  }
+  std::vector<std::pair<int, IcpResult>> added;  // (edge index, ICP) of the verified closures
+  for (int cand : chosen) {
+    ++stats_.loop_candidates;
+    IcpResult icp;
+    if (!VerifyLoopClosure(cand, j, &icp)) continue;
+    PoseGraphEdge edge;
+    edge.i = cand;
+    edge.j = j;
+    edge.T_i_j = icp.T_ref_query;
+    edge.information = GraphEdgeInformation(icp);
+    // Huber on the whitened residual: loop_huber_m in units of edge_sigma (as the internal edges
+    // are weighted); with the calibrated information, at loop_huber_m along the best-known
+    // translation.
+    if (g.loop_huber_m <= 0.0) {
+      edge.huber_scale = 0.0;
+    } else if (g.edge_sigma > 0.0) {
+      edge.huber_scale = g.loop_huber_m / g.edge_sigma;
+    } else {
+      const double info_xy_max =
+          Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(edge.information.topLeftCorner<2, 2>())
+              .eigenvalues()(1);
+      edge.huber_scale = std::max(1.0, g.loop_huber_m * std::sqrt(info_xy_max));
+    }
+    graph_.AddEdge(edge);
+    added.emplace_back(graph_.num_edges() - 1, icp);
+    ++graph_loop_edges_;
+  }
+  if (added.empty()) return;
+  OptimizeAndFeedBack(res);
+  for (const auto& [edge_index, icp] : added) {
+    const PoseGraphEdge& e = graph_.edges()[edge_index];
+    if (!e.enabled) continue;  // rejected by the residual check
+    ++stats_.loop_closures;
+    KeyframeFactor f;
+    f.keyframe_i = e.i;
+    f.keyframe_j = e.j;
+    f.utime_i = keyframes_[e.i].utime;
+    f.utime_j = keyframes_[e.j].utime;
+    f.T_i_j = icp.T_ref_query;
+    f.information = icp.information;
+    f.is_loop_closure = true;
+    f.rms = icp.rms;
+    f.inlier_fraction = icp.inlier_fraction;
+    res->factors.push_back(f);
+  }
+}
+
+bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) const {
+  const GraphOptions& g = opt_.graph;
   // Reference: the candidate and its neighbours, in the candidate's base frame.
   std::vector<PointNormal> ref;
   const fl::Pose2 pc = graph_.pose(cand);
@@ -363,48 +455,25 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
       ref.push_back(q);
     }
   }
+  if (ref.empty()) return false;
+  const fl::Pose2 prior = pc.between(graph_.pose(j));
   IcpOptions io = opt_.icp;
   io.min_inlier_fraction = g.loop_min_inlier_fraction;
   io.max_rms = g.loop_max_rms;
   io.max_correspondence_m = std::max(io.max_correspondence_m, 1.0);
-  const fl::Pose2 prior = pc.between(pj);
-  const IcpResult icp = AlignPointToLine(ref, keyframes_[j].points_base, prior, io);
-  if (!icp.ok) return;
-  PoseGraphEdge edge;
-  edge.i = cand;
-  edge.j = j;
-  edge.T_i_j = icp.T_ref_query;
-  edge.information = GraphEdgeInformation(icp);
-  // Huber on the whitened residual: loop_huber_m in units of edge_sigma (as the internal edges
-  // are weighted); with the calibrated information, at loop_huber_m along the best-known
-  // translation.
-  if (g.loop_huber_m <= 0.0) {
-    edge.huber_scale = 0.0;
-  } else if (g.edge_sigma > 0.0) {
-    edge.huber_scale = g.loop_huber_m / g.edge_sigma;
-  } else {
-    const double info_xy_max =
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(edge.information.topLeftCorner<2, 2>())
-            .eigenvalues()(1);
-    edge.huber_scale = std::max(1.0, g.loop_huber_m * std::sqrt(info_xy_max));
-  }
-  graph_.AddEdge(edge);
-  const int edge_index = graph_.num_edges() - 1;
-  ++graph_loop_edges_;
-  OptimizeAndFeedBack(res);
-  if (!graph_.edges()[edge_index].enabled) return;  // rejected by the residual check
-  ++stats_.loop_closures;
-  KeyframeFactor f;
-  f.keyframe_i = cand;
-  f.keyframe_j = j;
-  f.utime_i = keyframes_[cand].utime;
-  f.utime_j = keyframes_[j].utime;
-  f.T_i_j = icp.T_ref_query;
-  f.information = icp.information;
-  f.is_loop_closure = true;
-  f.rms = icp.rms;
-  f.inlier_fraction = icp.inlier_fraction;
-  res->factors.push_back(f);
+  // ICP from the graph's relative pose first; when that fails (the drift since the candidate
+  // is beyond ICP's basin, or the first pairs lock onto the wrong wall), the best pose of a
+  // correlative search around it, then ICP from there.
+  *icp = AlignPointToLine(ref, keyframes_[j].points_base, prior, io);
+  if (icp->ok || !g.loop_search.enabled) return icp->ok;
+  std::vector<Eigen::Vector2d> ref_points(ref.size());
+  for (size_t i = 0; i < ref.size(); ++i) ref_points[i] = ref[i].p;
+  const CorrelativeResult cr =
+      CorrelativeMatch(ref_points, keyframes_[j].points_base, prior, g.loop_search);
+  if (!cr.ok || cr.score < g.loop_search.min_score || cr.at_window_edge) return false;
+  io.max_correspondence_m = opt_.icp.max_correspondence_m;
+  *icp = AlignPointToLine(ref, keyframes_[j].points_base, cr.T_ref_query, io);
+  return icp->ok;
 }
 
 bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
@@ -454,6 +523,7 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
 
 void RbpfSlam::RebuildMaps() {
   TiledGrid map(opt_.grid);
+  map.BeginBatch();
   std::vector<Eigen::Vector2d> ends;
   std::vector<uint8_t> hit;
   for (int k = 0; k < graph_.num_nodes(); ++k) {
@@ -463,6 +533,7 @@ void RbpfSlam::RebuildMaps() {
     for (size_t i = 0; i < ends.size(); ++i) ends[i] = T * keyframes_[k].points_base[i];
     map.IntegrateScan(T * T_base_laser_.translation(), ends, hit);
   }
+  map.EndBatch();
   for (Particle& p : particles_) p.map = map;
 }
 

@@ -10,9 +10,7 @@ namespace {
 inline int LocalIndex(int cx, int cy) {
   return ((cy & (kTileSize - 1)) << kTileBits) | (cx & (kTileSize - 1));
 }
-int16_t ScaleLogOdds(double l) {
-  return static_cast<int16_t>(std::lround(l * kLogOddsScale));
-}
+int16_t ScaleLogOdds(double l) { return static_cast<int16_t>(std::lround(l * kLogOddsScale)); }
 }  // namespace
 
 TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
@@ -42,7 +40,14 @@ TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
       if (d <= dist_max_) disk_.push_back({dx, dy, d});
     }
   }
-  std::stable_sort(disk_.begin(), disk_.end(), [](const Offset& a, const Offset& b) { return a.d < b.d; });
+  std::stable_sort(disk_.begin(), disk_.end(),
+                   [](const Offset& a, const Offset& b) { return a.d < b.d; });
+  disk_start_.assign(static_cast<size_t>(dist_max_) + 1, disk_.size());
+  for (int d = dist_max_; d >= 0; --d) {
+    size_t i = 0;
+    while (i < disk_.size() && disk_[i].d < d) ++i;
+    disk_start_[d] = i;
+  }
   empty_ = std::make_shared<Tile>();
   empty_->log_odds.fill(0);
   empty_->dist.fill(static_cast<uint8_t>(dist_max_));
@@ -90,7 +95,6 @@ Tile* TiledGrid::MutableTile(int tx, int ty) {
   return slot.get();
 }
 
-
 void TiledGrid::SetRawDist(int cx, int cy, int value) {
   Tile* t = MutableTile(cx >> kTileBits, cy >> kTileBits);
   t->dist[LocalIndex(cx, cy)] = static_cast<uint8_t>(value);
@@ -127,11 +131,49 @@ void TiledGrid::UpdateCell(int cx, int cy, int delta_scaled) {
   if (now != was) {
     t->occupied += now ? 1 : -1;
     if (now) {
-      OnBecameOccupied(cx, cy);
+      OnBecameOccupiedOrDefer(cx, cy);
     } else {
-      OnBecameFree(cx, cy);
+      OnBecameFreeOrDefer(cx, cy);
     }
   }
+}
+
+void TiledGrid::OnBecameOccupiedOrDefer(int cx, int cy) {
+  if (batch_) {
+    SetRawDist(cx, cy, 0);
+  } else {
+    OnBecameOccupied(cx, cy);
+  }
+}
+
+void TiledGrid::OnBecameFreeOrDefer(int cx, int cy) {
+  if (batch_) {
+    SetRawDist(cx, cy, dist_max_);  // any value but 0; the field is recomputed by EndBatch()
+  } else {
+    OnBecameFree(cx, cy);
+  }
+}
+
+void TiledGrid::EndBatch() {
+  if (!batch_) return;
+  batch_ = false;
+  // Reset every distance, then let each obstacle cell stamp its disk.
+  std::vector<std::pair<int, int>> obstacles;
+  for (int iy = 0; iy < nty_; ++iy) {
+    for (int ix = 0; ix < ntx_; ++ix) {
+      if (!tiles_[static_cast<size_t>(iy) * ntx_ + ix]) continue;
+      Tile* t = MutableTile(ix + tx0_, iy + ty0_);
+      for (int k = 0; k < kTileCells; ++k) {
+        if (t->dist[k] == 0) {
+          obstacles.emplace_back((ix + tx0_) * kTileSize + (k & (kTileSize - 1)),
+                                 (iy + ty0_) * kTileSize + (k >> kTileBits));
+        } else {
+          t->dist[k] = static_cast<uint8_t>(dist_max_);
+        }
+      }
+    }
+  }
+  for (const auto& [cx, cy] : obstacles) OnBecameOccupied(cx, cy);
 }
 
 void TiledGrid::OnBecameOccupied(int cx, int cy) {
@@ -148,10 +190,13 @@ void TiledGrid::OnBecameFree(int cx, int cy) {
   for (const Offset& o : disk_) {
     const int x = cx + o.dx, y = cy + o.dy;
     const int cur = RawDist(x, y);
-    if (cur == 0) continue;                 // another obstacle
-    if (o.d != 0 && cur != o.d) continue;   // its nearest obstacle is another one
+    if (cur == 0) continue;                // another obstacle
+    if (o.d != 0 && cur != o.d) continue;  // its nearest obstacle is another one
+    // Its new nearest obstacle is at least as far as the old one (`cur`): offsets nearer than
+    // that hold no obstacle and are skipped.
     int best = dist_max_;
-    for (const Offset& q : disk_) {
+    for (size_t i = disk_start_[cur]; i < disk_.size(); ++i) {
+      const Offset& q = disk_[i];
       if (q.d >= best) break;
       if (RawDist(x + q.dx, y + q.dy) == 0) {
         best = q.d;
@@ -199,7 +244,7 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
       l = static_cast<int16_t>(v);
       if (v < free_threshold_ && tile->dist[idx] == 0) {
         tile->occupied -= 1;
-        OnBecameFree(x, y);
+        OnBecameFreeOrDefer(x, y);
       }
       if (at_end) break;
       const int e2 = 2 * err;

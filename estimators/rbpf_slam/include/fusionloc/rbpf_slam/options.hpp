@@ -152,27 +152,67 @@ struct IcpOptions {
 };
 
 // Keyframes, loop closures and the Ceres pose graph (the paper's §1.2 improvement).
+// Correlative search of loop-closure candidates (correlative_matcher.hpp documents the method).
+struct CorrelativeOptions {
+  bool enabled = true;          // [-] false: loop closures are verified by ICP from the graph's
+                                //     relative pose alone (converges only within ~0.3 m)
+  double linear_window = 1.0;   // [m] search ± this in x and y around the graph's relative pose
+  double angular_window = 0.2;  // [rad] search ± this in heading
+  double angular_step = 0.0;    // [rad] 0 = resolution / (95th-percentile point range)
+  double resolution = 0.05;     // [m] lookup-grid cell and translation step
+  double sigma = 0.05;          // [m] width of the lookup kernel
+  int coarse_factor = 4;        // [-] coarse translation step, in cells (>= 1)
+  int max_points = 150;         // [-] query points used (evenly subsampled); 0 = all
+  double min_score = 0.3;       // [-] best mean lookup value below this: no loop closure
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("enabled", &enabled);
+    a->Visit("linear_window", &linear_window);
+    a->Visit("angular_window", &angular_window);
+    a->Visit("angular_step", &angular_step);
+    a->Visit("resolution", &resolution);
+    a->Visit("sigma", &sigma);
+    a->Visit("coarse_factor", &coarse_factor);
+    a->Visit("max_points", &max_points);
+    a->Visit("min_score", &min_score);
+  }
+  Status Validate() const;
+};
+
 struct GraphOptions {
   bool enabled = true;                 // [-] false: plain RBPF, no keyframe graph
   double keyframe_distance = 0.5;      // [m] new keyframe after this much travel
   double keyframe_angle = 0.35;        // [rad] or this much rotation
   double loop_search_radius = 3.0;     // [m] keyframes closer than this are loop candidates
+  int loop_max_candidates = 2;         // [-] candidates tried per new keyframe (nearest first,
+                                       //     each from a different submap)
   double loop_min_travel = 10.0;       // [m] path length between candidate and current keyframe
-  int loop_submap_half_width = 2;      // [-] keyframes on each side of a candidate merged as reference
+  int loop_submap_half_width = 5;      // [-] keyframes on each side of a candidate merged as
+                                       //     reference (more overlap, fewer missed closures)
   double loop_min_inlier_fraction = 0.6;  // [-] stricter ICP verification for loop closures
   double loop_max_rms = 0.04;          // [m]
   double loop_huber_m = 0.1;           // [m] robust loss scale on loop-closure edges
   double loop_max_residual_m = 1.0;    // [m] after optimisation, a loop edge still off by more
   double loop_max_residual_rad = 0.3;  // [rad] than this is rejected as wrong and re-optimised
-  double edge_sigma = 0.03;            // [m] ICP edges of this internal graph weigh H/edge_sigma²
-                                       //     (the tuning the filter's feedback was built on);
-                                       //     0 = use the calibrated information published to
-                                       //     the fusion (icp.hpp). Published factors always
-                                       //     carry the calibrated one.
+  double edge_sigma = 0.3;             // [m] ICP edges of this internal graph weigh H/edge_sigma²
+                                       //     (chosen on the multi-seed laser benchmark: 0.03
+                                       //     made the chain too stiff for loop closures to
+                                       //     bend, 1.0 let wrong closures in); 0 = use the
+                                       //     calibrated information published to the fusion
+                                       //     (icp.hpp). Published factors always carry the
+                                       //     calibrated one.
   int max_iterations = 50;             // [-] Levenberg-Marquardt iterations per optimisation
   bool feed_back = true;               // [-] rebuild the particle maps from the corrected keyframes
   double feedback_min_correction_m = 0.05;  // [m] ... when the newest keyframe moved this much
                                             //     (or 0.02 rad)
+  CorrelativeOptions loop_search;      // correlative search before the ICP verification
+  bool divergence_check = true;        // [-] at each keyframe also run ICP from the odometry's
+                                       //     relative pose; if it fits clearly better than the
+                                       //     one from the filter's, the filter has locked onto
+                                       //     a wrong match: its pose is corrected and its maps
+                                       //     rebuilt from the keyframes
+  double divergence_min_gain = 0.05;   // [-] inlier-fraction gain that counts as "clearly"
 
   template <class A>
   void Serialize(A* a) {
@@ -180,6 +220,7 @@ struct GraphOptions {
     a->Visit("keyframe_distance", &keyframe_distance);
     a->Visit("keyframe_angle", &keyframe_angle);
     a->Visit("loop_search_radius", &loop_search_radius);
+    a->Visit("loop_max_candidates", &loop_max_candidates);
     a->Visit("loop_min_travel", &loop_min_travel);
     a->Visit("loop_submap_half_width", &loop_submap_half_width);
     a->Visit("loop_min_inlier_fraction", &loop_min_inlier_fraction);
@@ -191,6 +232,9 @@ struct GraphOptions {
     a->Visit("max_iterations", &max_iterations);
     a->Visit("feed_back", &feed_back);
     a->Visit("feedback_min_correction_m", &feedback_min_correction_m);
+    a->Visit("loop_search", &loop_search);
+    a->Visit("divergence_check", &divergence_check);
+    a->Visit("divergence_min_gain", &divergence_min_gain);
   }
   Status Validate() const;
 };

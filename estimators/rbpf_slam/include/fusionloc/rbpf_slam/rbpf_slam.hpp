@@ -60,6 +60,7 @@ struct RbpfSlamStats {
   int64_t loop_closures = 0;            // verified, added to the graph and kept
   int64_t loop_rejections = 0;          // loop edges dropped after optimisation (gross residual)
   int64_t map_rebuilds = 0;             // corrections fed back to the filter
+  int64_t divergences = 0;              // keyframes where ICP from odometry overruled the filter
 };
 
 class RbpfSlam {
@@ -106,6 +107,7 @@ class RbpfSlam {
     std::vector<Eigen::Vector2d> points_base;  // valid hits, base frame, scan order
     std::vector<PointNormal> normals_base;
     double path_length;                       // [m] travelled when created
+    fl::Pose2 odom;                           // odometry pose (flagged jumps removed) then
   };
   struct Particle {
     fl::Pose2 pose;
@@ -118,6 +120,9 @@ class RbpfSlam {
   void Integrate(Particle* p);
   void MaybeAddKeyframe(fl::Utime utime, ScanResult* result);
   void SearchLoopClosure(int kf, ScanResult* result);
+  // Matches keyframe j against the submap around keyframe `cand` (correlative search, then
+  // ICP); true and the ICP result if verified.
+  bool VerifyLoopClosure(int cand, int j, IcpResult* icp) const;
   Eigen::Matrix3d GraphEdgeInformation(const IcpResult& icp) const;
   bool OptimizeAndFeedBack(ScanResult* result);
   void RebuildMaps();

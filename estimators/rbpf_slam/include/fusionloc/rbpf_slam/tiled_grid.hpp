@@ -71,6 +71,14 @@ class TiledGrid {
     return IsKnown(CellX(p_world.x()), CellX(p_world.y()));
   }
 
+  // Batch building (map rebuilds from many keyframes): between BeginBatch() and EndBatch() the
+  // log-odds and obstacle flags are updated as usual but the distance field is not; EndBatch()
+  // recomputes it once for the whole grid. The result is identical to integrating the scans one
+  // by one, and much cheaper, since no cell's distance is repaired again and again as obstacles
+  // come and go. Distance() is not valid inside a batch.
+  void BeginBatch() { batch_ = true; }
+  void EndBatch();
+
   // Adds log-odds to one cell (used by IntegrateScan; public for tests).
   void UpdateCell(int cx, int cy, int delta_scaled);
 
@@ -101,6 +109,8 @@ class TiledGrid {
   void SetRawDist(int cx, int cy, int value);
   void OnBecameOccupied(int cx, int cy);
   void OnBecameFree(int cx, int cy);
+  void OnBecameOccupiedOrDefer(int cx, int cy);
+  void OnBecameFreeOrDefer(int cx, int cy);
 
   GridOptions opt_;
   double res_;
@@ -114,10 +124,12 @@ class TiledGrid {
     int dx, dy, d;
   };
   std::vector<Offset> disk_;  // sorted by distance
+  std::vector<size_t> disk_start_;  // [d]: index of the first offset of disk_ at distance >= d
 
   int tx0_ = 0, ty0_ = 0, ntx_ = 0, nty_ = 0;
   std::vector<std::shared_ptr<Tile>> tiles_;
   std::shared_ptr<Tile> empty_;  // prototype of a fresh tile
+  bool batch_ = false;           // inside BeginBatch() / EndBatch()
 };
 
 }  // namespace fl::rbpf
