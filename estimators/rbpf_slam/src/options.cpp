@@ -73,6 +73,7 @@ Status MotionOptions::Validate() const {
 Status MatcherOptions::Validate() const {
   if (beam_step < 1) return Status::Error("matcher.beam_step must be >= 1");
   if (max_iterations < 0) return Status::Error("matcher.max_iterations must be >= 0");
+  FL_RETURN_IF_ERROR(Positive("matcher.converged_step", converged_step));
   FL_RETURN_IF_ERROR(Positive("matcher.sigma", sigma));
   FL_RETURN_IF_ERROR(Positive("matcher.z_hit", z_hit));
   FL_RETURN_IF_ERROR(Positive("matcher.z_rand", z_rand));

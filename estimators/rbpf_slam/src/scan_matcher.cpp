@@ -45,16 +45,31 @@ double ScanLogLikelihood(const TiledGrid& grid, const std::vector<Eigen::Vector2
 }
 
 namespace {
-// Sum of squared (saturated) distances, the matcher's cost, over the points in `use`.
-double Cost(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
-            const std::vector<uint8_t>& use, const fl::Pose2& T) {
+// The matcher's cost, the sum of squared (saturated) distances over the points in `use`, and, over
+// the points inside the field (d < dmax), the Gauss-Newton Hessian H = Σ JᵀJ and gradient g = Σ Jᵀd
+// in one pass: an accepted step's pass is the next iteration's.
+double Evaluate(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
+                const std::vector<uint8_t>& use, const fl::Pose2& T, double dmax,
+                Eigen::Matrix3d* H, Eigen::Vector3d* g, int* n) {
   const double c = std::cos(T.theta), s = std::sin(T.theta);
   double cost = 0.0;
+  H->setZero();
+  g->setZero();
+  *n = 0;
   for (size_t i = 0; i < pts.size(); ++i) {
     if (!use[i]) continue;
     const Eigen::Vector2d& p = pts[i];
-    const double d = grid.Distance({T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y()});
+    const Eigen::Vector2d w(T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y());
+    Eigen::Vector2d grad;
+    const double d = grid.Distance(w, &grad);
     cost += d * d;
+    if (d >= dmax) continue;
+    const Eigen::Vector3d J(
+        grad.x(), grad.y(),
+        grad.x() * (-s * p.x() - c * p.y()) + grad.y() * (c * p.x() - s * p.y()));
+    H->noalias() += J * J.transpose();
+    g->noalias() += J * d;
+    ++*n;
   }
   return cost;
 }
@@ -102,31 +117,19 @@ MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>&
       use[i] = Observed(grid, p, w, c, s, o) ? 1 : 0;
     }
   }
-  double cost = Cost(grid, pts, use, T);
+  Eigen::Matrix3d H;
+  Eigen::Vector3d g;
+  int n = 0;
+  double cost = Evaluate(grid, pts, use, T, dmax, &H, &g, &n);
   double lambda = 1e-3;
   double length_sq = 0.0;
   for (const Eigen::Vector2d& p : pts) length_sq += p.squaredNorm();
   const double length_m = std::sqrt(length_sq / static_cast<double>(pts.size()));
   Eigen::Matrix3d P = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d H_new;
+  Eigen::Vector3d g_new;
+  int n_new = 0;
   for (int it = 0; it < o.max_iterations; ++it) {
-    const double c = std::cos(T.theta), s = std::sin(T.theta);
-    Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d g = Eigen::Vector3d::Zero();
-    int n = 0;
-    for (size_t i = 0; i < pts.size(); ++i) {
-      if (!use[i]) continue;
-      const Eigen::Vector2d& p = pts[i];
-      const Eigen::Vector2d w(T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y());
-      Eigen::Vector2d grad;
-      const double d = grid.Distance(w, &grad);
-      if (d >= dmax) continue;
-      const Eigen::Vector3d J(
-          grad.x(), grad.y(),
-          grad.x() * (-s * p.x() - c * p.y()) + grad.y() * (c * p.x() - s * p.y()));
-      H.noalias() += J * J.transpose();
-      g.noalias() += J * d;
-      ++n;
-    }
     if (n < 3) break;
     if (it == 0) P = WellConstrainedProjector(H, length_m, o.degeneracy_ratio, &r.degenerate_dims);
     bool improved = false;
@@ -136,11 +139,15 @@ MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>&
       const Eigen::Vector3d delta = P * (-A.ldlt().solve(g));
       if (!delta.allFinite()) break;
       const fl::Pose2 T_new(T.x + delta.x(), T.y + delta.y(), fl::WrapAngle(T.theta + delta.z()));
-      const double cost_new = Cost(grid, pts, use, T_new);
+      const double cost_new = Evaluate(grid, pts, use, T_new, dmax, &H_new, &g_new, &n_new);
       if (cost_new < cost) {
-        const bool small = delta.head<2>().norm() < 1e-4 && std::abs(delta.z()) < 1e-4;
+        const bool small =
+            delta.head<2>().norm() < o.converged_step && std::abs(delta.z()) < o.converged_step;
         T = T_new;
         cost = cost_new;
+        H = H_new;
+        g = g_new;
+        n = n_new;
         lambda = std::max(1e-6, lambda * 0.3);
         improved = true;
         if (small) it = o.max_iterations;  // converged

@@ -42,6 +42,10 @@ TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
   }
   std::stable_sort(disk_.begin(), disk_.end(),
                    [](const Offset& a, const Offset& b) { return a.d < b.d; });
+  disk_rows_ = disk_;
+  std::sort(disk_rows_.begin(), disk_rows_.end(), [](const Offset& a, const Offset& b) {
+    return a.dy != b.dy ? a.dy < b.dy : a.dx < b.dx;
+  });
   disk_start_.assign(static_cast<size_t>(dist_max_) + 1, disk_.size());
   for (int d = dist_max_; d >= 0; --d) {
     size_t i = 0;
@@ -177,9 +181,27 @@ void TiledGrid::EndBatch() {
 }
 
 void TiledGrid::OnBecameOccupied(int cx, int cy) {
-  for (const Offset& o : disk_) {
+  // Row-major offsets: consecutive cells share a tile, which is looked up (and made writable)
+  // only when one of its cells actually gets nearer.
+  int ctx = INT32_MIN, cty = INT32_MIN;
+  const Tile* read = nullptr;
+  Tile* write = nullptr;
+  for (const Offset& o : disk_rows_) {
     const int x = cx + o.dx, y = cy + o.dy;
-    if (RawDist(x, y) > o.d) SetRawDist(x, y, o.d);
+    const int tx = x >> kTileBits, ty = y >> kTileBits;
+    if (tx != ctx || ty != cty) {
+      ctx = tx;
+      cty = ty;
+      read = TileAt(tx, ty);
+      write = nullptr;
+    }
+    const int idx = LocalIndex(x, y);
+    if ((read ? read->dist[idx] : dist_max_) <= o.d) continue;
+    if (!write) {
+      write = MutableTile(tx, ty);
+      read = write;
+    }
+    write->dist[idx] = static_cast<uint8_t>(o.d);
   }
 }
 
@@ -187,9 +209,16 @@ void TiledGrid::OnBecameFree(int cx, int cy) {
   // Only cells whose nearest obstacle was this one (stored distance == distance to it) change;
   // each of them searches the disk outwards (offsets sorted by distance) for its new nearest.
   SetRawDist(cx, cy, 1);  // no longer an obstacle (1 ≠ 0); recomputed below
-  for (const Offset& o : disk_) {
+  int ctx = INT32_MIN, cty = INT32_MIN;
+  const Tile* read = nullptr;
+  for (const Offset& o : disk_rows_) {  // row-major: the tile lookup is cached
     const int x = cx + o.dx, y = cy + o.dy;
-    const int cur = RawDist(x, y);
+    if ((x >> kTileBits) != ctx || (y >> kTileBits) != cty) {
+      ctx = x >> kTileBits;
+      cty = y >> kTileBits;
+      read = TileAt(ctx, cty);
+    }
+    const int cur = read ? read->dist[LocalIndex(x, y)] : dist_max_;
     if (cur == 0) continue;                // another obstacle
     if (o.d != 0 && cur != o.d) continue;  // its nearest obstacle is another one
     // Its new nearest obstacle is at least as far as the old one (`cur`): offsets nearer than

@@ -73,6 +73,7 @@ struct MatcherOptions {
   int beam_step = 1;               // [-] use every n-th beam for matching and weighting (2 halves
                                    //     the matcher cost but lost ~10x accuracy on Intel)
   int max_iterations = 12;         // [-] Gauss-Newton iterations per particle
+  double converged_step = 1e-4;    // [m, rad] stop when a step is smaller in every component
   double sigma = 0.05;             // [m] std of the likelihood field (eq. 3)
   double z_hit = 0.95;             // [-] weight of the Gaussian part of the beam likelihood
   double z_rand = 0.05;            // [-] weight of the uniform part (random / unexplained beams)
@@ -95,6 +96,7 @@ struct MatcherOptions {
   void Serialize(A* a) {
     a->Visit("beam_step", &beam_step);
     a->Visit("max_iterations", &max_iterations);
+    a->Visit("converged_step", &converged_step);
     a->Visit("sigma", &sigma);
     a->Visit("z_hit", &z_hit);
     a->Visit("z_rand", &z_rand);

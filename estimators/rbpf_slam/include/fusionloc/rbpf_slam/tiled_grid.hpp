@@ -124,6 +124,7 @@ class TiledGrid {
     int dx, dy, d;
   };
   std::vector<Offset> disk_;  // sorted by distance
+  std::vector<Offset> disk_rows_;   // the same offsets in row-major order
   std::vector<size_t> disk_start_;  // [d]: index of the first offset of disk_ at distance >= d
 
   int tx0_ = 0, ty0_ = 0, ntx_ = 0, nty_ = 0;
