@@ -242,6 +242,7 @@ int main(int argc, char** argv) {
     status.Set("neff", r.neff);
     status.Set("keyframes", static_cast<double>(s.keyframes));
     status.Set("loop_closures", static_cast<double>(s.loop_closures));
+    status.Set("divergences", static_cast<double>(s.divergences));
     status.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
     status.Set("invalid_beams", static_cast<double>(s.invalid_beams));
     status.SetState(fusionloc::status_t::LEVEL_OK, "running");
@@ -287,7 +288,9 @@ int main(int argc, char** argv) {
   }
   const auto& s = slam.stats();
   FL_LOG(INFO) << "scans " << s.scans << ", processed " << s.processed << ", keyframes " << s.keyframes
-               << ", loop closures " << s.loop_closures << ", dropped (time) " << s.dropped_time_backwards
+               << ", loop closures " << s.loop_closures << " (of " << s.loop_candidates
+               << " candidates), divergences caught " << s.divergences
+               << ", dropped (time) " << s.dropped_time_backwards
                << ", rejected " << s.rejected_bad_scan << ", odometry jumps " << s.odometry_jumps;
   status.Tick(true);
   return 0;
