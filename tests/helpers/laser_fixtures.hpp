@@ -88,6 +88,21 @@ class LaserWorld {
   std::vector<Segment> segments_;
 };
 
+// The finite returns of a 361-beam, 180° scan (0.5° steps, first beam at the right) from `pose`,
+// as points in the laser frame; range noise `noise` [m] drawn with `seed`.
+inline std::vector<Eigen::Vector2d> ScanPoints(const LaserWorld& world, const fl::Pose2& pose,
+                                               double noise, unsigned seed) {
+  std::mt19937 rng(seed);
+  const auto r = world.Scan(pose, 361, -M_PI / 2, M_PI / 360, 25.0, noise, &rng);
+  std::vector<Eigen::Vector2d> pts;
+  for (int k = 0; k < 361; ++k) {
+    if (!std::isfinite(r[k])) continue;
+    const double a = -M_PI / 2 + k * M_PI / 360;
+    pts.emplace_back(r[k] * std::cos(a), r[k] * std::sin(a));
+  }
+  return pts;
+}
+
 struct LoopRunOptions {
   int laps = 1;                 // times around the loop corridor
   double step_m = 0.1;          // [m] travel between scans

@@ -10,18 +10,7 @@
 namespace fl::rbpf {
 namespace {
 
-std::vector<Eigen::Vector2d> ScanPoints(const test::LaserWorld& w, const fl::Pose2& pose,
-                                        double noise, unsigned seed) {
-  std::mt19937 rng(seed);
-  const auto r = w.Scan(pose, 361, -M_PI / 2, M_PI / 360, 25.0, noise, &rng);
-  std::vector<Eigen::Vector2d> pts;
-  for (int k = 0; k < 361; ++k) {
-    if (!std::isfinite(r[k])) continue;
-    const double a = -M_PI / 2 + k * M_PI / 360;
-    pts.emplace_back(r[k] * std::cos(a), r[k] * std::sin(a));
-  }
-  return pts;
-}
+using test::ScanPoints;
 
 // Brute force over the same discrete poses, for comparison with the branch and bound.
 double ExhaustiveBest(const std::vector<Eigen::Vector2d>& ref,
