@@ -17,6 +17,12 @@ namespace {
 // Weak information for a sequential graph edge when ICP failed (keeps the graph connected):
 // σ = 0.1 m, 0.05 rad.
 Eigen::Matrix3d WeakInformation() { return Eigen::Vector3d(100.0, 100.0, 400.0).asDiagonal(); }
+
+// A sequential ICP result is trusted only within 0.5 m / 0.3 rad of where it started.
+bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
+  const fl::Pose2 jump = start.between(icp.T_ref_query);
+  return icp.ok && std::hypot(jump.x, jump.y) < 0.5 && std::abs(jump.theta) < 0.3;
+}
 }  // namespace
 
 RbpfSlam::RbpfSlam(const RbpfSlamOptions& options)
@@ -300,8 +306,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   if (opt_.graph.enabled) {
     IcpResult icp =
         AlignPointToLine(keyframes_[i].normals_base, keyframes_[j].points_base, prior, opt_.icp);
-    fl::Pose2 jump = prior.between(icp.T_ref_query);
-    bool icp_ok = icp.ok && std::hypot(jump.x, jump.y) < 0.5 && std::abs(jump.theta) < 0.3;
+    bool icp_ok = NearStart(icp, prior);
     if (opt_.graph.divergence_check) {
       // Did the filter lock onto a wrong match? ICP from the odometry's relative pose too.
       const fl::Pose2 odom_rel = keyframes_[i].odom.between(keyframes_[j].odom);
@@ -309,9 +314,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
       if (std::hypot(diff.x, diff.y) > 0.05 || std::abs(diff.theta) > 0.03) {
         const IcpResult alt = AlignPointToLine(keyframes_[i].normals_base,
                                                keyframes_[j].points_base, odom_rel, opt_.icp);
-        const fl::Pose2 alt_jump = odom_rel.between(alt.T_ref_query);
-        const bool alt_ok =
-            alt.ok && std::hypot(alt_jump.x, alt_jump.y) < 0.5 && std::abs(alt_jump.theta) < 0.3;
+        const bool alt_ok = NearStart(alt, odom_rel);
         // The better fit of the two starts; when it is the filter's, it must agree with the
         // odometry's (two independent starts, one answer).
         const bool use_alt =
@@ -340,22 +343,27 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
     if (icp_ok) {
       edge.T_i_j = icp.T_ref_query;
       edge.information = GraphEdgeInformation(icp);
-      KeyframeFactor f;
-      f.keyframe_i = i;
-      f.keyframe_j = j;
-      f.utime_i = keyframes_[i].utime;
-      f.utime_j = keyframes_[j].utime;
-      f.T_i_j = icp.T_ref_query;
-      f.information = icp.information;
-      f.rms = icp.rms;
-      f.inlier_fraction = icp.inlier_fraction;
-      res->factors.push_back(f);
+      res->factors.push_back(Factor(i, j, icp, false));
     } else {
       ++stats_.icp_failures;
     }
   }
   graph_.AddEdge(edge);
   if (opt_.graph.enabled) SearchLoopClosure(j, res);
+}
+
+KeyframeFactor RbpfSlam::Factor(int i, int j, const IcpResult& icp, bool is_loop_closure) const {
+  KeyframeFactor f;
+  f.keyframe_i = i;
+  f.keyframe_j = j;
+  f.utime_i = keyframes_[i].utime;
+  f.utime_j = keyframes_[j].utime;
+  f.T_i_j = icp.T_ref_query;
+  f.information = icp.information;
+  f.is_loop_closure = is_loop_closure;
+  f.rms = icp.rms;
+  f.inlier_fraction = icp.inlier_fraction;
+  return f;
 }
 
 Eigen::Matrix3d RbpfSlam::GraphEdgeInformation(const IcpResult& icp) const {
@@ -423,17 +431,7 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
     const PoseGraphEdge& e = graph_.edges()[edge_index];
     if (!e.enabled) continue;  // rejected by the residual check
     ++stats_.loop_closures;
-    KeyframeFactor f;
-    f.keyframe_i = e.i;
-    f.keyframe_j = e.j;
-    f.utime_i = keyframes_[e.i].utime;
-    f.utime_j = keyframes_[e.j].utime;
-    f.T_i_j = icp.T_ref_query;
-    f.information = icp.information;
-    f.is_loop_closure = true;
-    f.rms = icp.rms;
-    f.inlier_fraction = icp.inlier_fraction;
-    res->factors.push_back(f);
+    res->factors.push_back(Factor(e.i, e.j, icp, true));
   }
 }
 

@@ -124,6 +124,8 @@ class RbpfSlam {
   // ICP); true and the ICP result if verified.
   bool VerifyLoopClosure(int cand, int j, IcpResult* icp) const;
   Eigen::Matrix3d GraphEdgeInformation(const IcpResult& icp) const;
+  // The published factor of an ICP result between keyframes i and j (calibrated information).
+  KeyframeFactor Factor(int i, int j, const IcpResult& icp, bool is_loop_closure) const;
   bool OptimizeAndFeedBack(ScanResult* result);
   void RebuildMaps();
   int BestIndex() const;
