@@ -136,7 +136,9 @@ class PointHash {
  private:
   int Cell(double v) const { return static_cast<int>(std::floor(v * inv_)); }
   static int64_t Key(int x, int y) {
-    return (static_cast<int64_t>(x) << 32) ^ static_cast<int64_t>(static_cast<uint32_t>(y));
+    // Shift as unsigned: shifting a negative int64 left is undefined before C++20 (UBSan).
+    return static_cast<int64_t>((static_cast<uint64_t>(static_cast<uint32_t>(x)) << 32) |
+                                static_cast<uint64_t>(static_cast<uint32_t>(y)));
   }
   const std::vector<PointNormal>& pts_;
   double inv_;
