@@ -47,10 +47,10 @@ TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
     return a.dy != b.dy ? a.dy < b.dy : a.dx < b.dx;
   });
   disk_start_.assign(static_cast<size_t>(dist_max_) + 1, disk_.size());
-  for (int d = dist_max_; d >= 0; --d) {
-    size_t i = 0;
-    while (i < disk_.size() && disk_[i].d < d) ++i;
-    disk_start_[d] = i;
+  for (int d = 0; d <= dist_max_; ++d) {
+    disk_start_[d] = std::lower_bound(disk_.begin(), disk_.end(), d,
+                                      [](const Offset& o, int v) { return o.d < v; }) -
+                     disk_.begin();
   }
   empty_ = std::make_shared<Tile>();
   empty_->log_odds.fill(0);
@@ -135,26 +135,10 @@ void TiledGrid::UpdateCell(int cx, int cy, int delta_scaled) {
   if (now != was) {
     t->occupied += now ? 1 : -1;
     if (now) {
-      OnBecameOccupiedOrDefer(cx, cy);
+      OnBecameOccupied(cx, cy);
     } else {
-      OnBecameFreeOrDefer(cx, cy);
+      OnBecameFree(cx, cy);
     }
-  }
-}
-
-void TiledGrid::OnBecameOccupiedOrDefer(int cx, int cy) {
-  if (batch_) {
-    SetRawDist(cx, cy, 0);
-  } else {
-    OnBecameOccupied(cx, cy);
-  }
-}
-
-void TiledGrid::OnBecameFreeOrDefer(int cx, int cy) {
-  if (batch_) {
-    SetRawDist(cx, cy, dist_max_);  // any value but 0; the field is recomputed by EndBatch()
-  } else {
-    OnBecameFree(cx, cy);
   }
 }
 
@@ -181,6 +165,10 @@ void TiledGrid::EndBatch() {
 }
 
 void TiledGrid::OnBecameOccupied(int cx, int cy) {
+  if (batch_) {  // only the obstacle flag; EndBatch() computes the field
+    SetRawDist(cx, cy, 0);
+    return;
+  }
   // Row-major offsets: consecutive cells share a tile, which is looked up (and made writable)
   // only when one of its cells actually gets nearer.
   int ctx = INT32_MIN, cty = INT32_MIN;
@@ -206,6 +194,10 @@ void TiledGrid::OnBecameOccupied(int cx, int cy) {
 }
 
 void TiledGrid::OnBecameFree(int cx, int cy) {
+  if (batch_) {  // any value but 0; EndBatch() computes the field
+    SetRawDist(cx, cy, dist_max_);
+    return;
+  }
   // Only cells whose nearest obstacle was this one (stored distance == distance to it) change;
   // each of them searches the disk outwards (offsets sorted by distance) for its new nearest.
   SetRawDist(cx, cy, 1);  // no longer an obstacle (1 ≠ 0); recomputed below
@@ -273,7 +265,7 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
       l = static_cast<int16_t>(v);
       if (v < free_threshold_ && tile->dist[idx] == 0) {
         tile->occupied -= 1;
-        OnBecameFreeOrDefer(x, y);
+        OnBecameFree(x, y);
       }
       if (at_end) break;
       const int e2 = 2 * err;

@@ -109,8 +109,6 @@ class TiledGrid {
   void SetRawDist(int cx, int cy, int value);
   void OnBecameOccupied(int cx, int cy);
   void OnBecameFree(int cx, int cy);
-  void OnBecameOccupiedOrDefer(int cx, int cy);
-  void OnBecameFreeOrDefer(int cx, int cy);
 
   GridOptions opt_;
   double res_;
