@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <random>
 #include <vector>
 
@@ -102,6 +104,63 @@ TEST(TiledGrid, BatchBuildEqualsScanByScanIntegration) {
   }
   EXPECT_GT(obstacles, 500);
   EXPECT_GT(freed, 0) << "the scans should also clear some earlier hits";
+}
+
+// Cells a ray clears, by the definition: the Bresenham line from origin to end cell, without
+// the cells within `margin` (Chebyshev) of the end cell of a hit.
+std::vector<std::pair<int, int>> ClearedCells(int ox, int oy, int ex, int ey, bool hit,
+                                              int margin) {
+  std::vector<std::pair<int, int>> cells;
+  int x = ox, y = oy;
+  const int dx = std::abs(ex - ox), dy = -std::abs(ey - oy);
+  const int sx = ox < ex ? 1 : -1, sy = oy < ey ? 1 : -1;
+  int err = dx + dy;
+  while (true) {
+    if (hit && std::max(std::abs(ex - x), std::abs(ey - y)) <= margin) break;
+    cells.emplace_back(x, y);
+    if (x == ex && y == ey) break;
+    const int e2 = 2 * err;
+    if (e2 >= dy) {
+      err += dy;
+      x += sx;
+    }
+    if (e2 <= dx) {
+      err += dx;
+      y += sy;
+    }
+  }
+  return cells;
+}
+
+TEST(TiledGrid, RaysClearExactlyTheirBresenhamCellsUpToTheMargin) {
+  // IntegrateScan counts the cells to clear instead of testing each one's distance to the end:
+  // one miss on exactly the cells of the definition, every direction, margins 0-2.
+  for (int margin = 0; margin <= 2; ++margin) {
+    GridOptions o = Opts();
+    o.free_space_margin = margin;
+    for (int hit = 0; hit < 2; ++hit) {
+      for (int ex = -9; ex <= 9; ++ex) {
+        for (int ey = -9; ey <= 9; ++ey) {
+          TiledGrid g(o);
+          const Eigen::Vector2d origin(3 * 0.05 + 0.01, -2 * 0.05 + 0.02);  // cell (3, -2)
+          const Eigen::Vector2d end((3 + ex) * 0.05 + 0.03, (-2 + ey) * 0.05 + 0.04);
+          g.IntegrateScan(origin, {end}, {static_cast<uint8_t>(hit)});
+          std::vector<std::pair<int, int>> expected =
+              ClearedCells(3, -2, 3 + ex, -2 + ey, hit != 0, margin);
+          std::sort(expected.begin(), expected.end());
+          for (int y = -2 - 11; y <= -2 + 11; ++y) {
+            for (int x = 3 - 11; x <= 3 + 11; ++x) {
+              const bool cleared = g.LogOdds(x, y) < 0.0f;
+              const bool want = std::binary_search(expected.begin(), expected.end(),
+                                                   std::make_pair(x, y));
+              ASSERT_EQ(cleared, want) << "end " << ex << "," << ey << " cell " << x << "," << y
+                                       << " margin " << margin << " hit " << hit;
+            }
+          }
+        }
+      }
+    }
+  }
 }
 
 TEST(TiledGrid, CopyOnWriteCopiesOnlyTheTileWrittenTo) {

@@ -402,7 +402,8 @@ int main(int argc, char** argv) {
             .Add("loop_closures", static_cast<double>(st.loop_closures))
             .Add("loop_rejections", static_cast<double>(st.loop_rejections))
             .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
-          .Add("divergences", static_cast<double>(st.divergences))
+            .Add("rebuilds_continued", static_cast<double>(st.map_rebuilds_continued))
+            .Add("divergences", static_cast<double>(st.divergences))
             .Add("resamples", static_cast<double>(st.resamples))
             .Add("degenerate_pct",
                  100.0 * static_cast<double>(st.degenerate_matches) /

@@ -28,7 +28,8 @@ bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
 RbpfSlam::RbpfSlam(const RbpfSlamOptions& options)
     : opt_(options),
       T_base_laser_(options.base_laser_x, options.base_laser_y, options.base_laser_yaw),
-      rng_(static_cast<uint32_t>(options.seed)) {
+      rng_(static_cast<uint32_t>(options.seed)),
+      rebuild_map_(options.grid) {
   const Status s = options.Validate();
   if (!s.ok()) throw std::invalid_argument("RbpfSlamOptions: " + s.message());
   particles_.reserve(options.particles);
@@ -520,11 +521,24 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
 }
 
 void RbpfSlam::RebuildMaps() {
-  TiledGrid map(opt_.grid);
+  // The keyframes are integrated in order (clamped log-odds depend on the order). When the
+  // first keyframes of the last rebuild kept their poses bit for bit (a divergence correction
+  // moves only the newest node), that rebuild's map is continued with the keyframes after them:
+  // the same updates in the same order, so the same map.
+  const int n = graph_.num_nodes();
+  const int cached = static_cast<int>(rebuild_poses_.size());
+  int same = 0;
+  while (same < cached && same < n) {
+    const fl::Pose2 a = graph_.pose(same), b = rebuild_poses_[same];
+    if (a.x != b.x || a.y != b.y || a.theta != b.theta) break;
+    ++same;
+  }
+  const bool reuse = cached > 0 && same == cached;
+  TiledGrid map = reuse ? rebuild_map_ : TiledGrid(opt_.grid);
   map.BeginBatch();
   std::vector<Eigen::Vector2d> ends;
   std::vector<uint8_t> hit;
-  for (int k = 0; k < graph_.num_nodes(); ++k) {
+  for (int k = reuse ? cached : 0; k < n; ++k) {
     const fl::Pose2 T = graph_.pose(k);
     ends.resize(keyframes_[k].points_base.size());
     hit.assign(ends.size(), 1);
@@ -532,6 +546,10 @@ void RbpfSlam::RebuildMaps() {
     map.IntegrateScan(T * T_base_laser_.translation(), ends, hit);
   }
   map.EndBatch();
+  if (reuse) ++stats_.map_rebuilds_continued;
+  rebuild_poses_.resize(n);
+  for (int k = 0; k < n; ++k) rebuild_poses_[k] = graph_.pose(k);
+  rebuild_map_ = map;
   for (Particle& p : particles_) p.map = map;
 }
 

@@ -60,6 +60,7 @@ struct RbpfSlamStats {
   int64_t loop_closures = 0;            // verified, added to the graph and kept
   int64_t loop_rejections = 0;          // loop edges dropped after optimisation (gross residual)
   int64_t map_rebuilds = 0;             // corrections fed back to the filter
+  int64_t map_rebuilds_continued = 0;   // ... that continued the previous rebuild's map
   int64_t divergences = 0;              // keyframes where ICP from odometry overruled the filter
 };
 
@@ -153,6 +154,10 @@ class RbpfSlam {
   std::vector<uint8_t> is_hit_;
 
   std::vector<Keyframe> keyframes_;
+  // The last map rebuild and the keyframe poses it used (RebuildMaps continues it when they
+  // did not change).
+  TiledGrid rebuild_map_;
+  std::vector<fl::Pose2> rebuild_poses_;
   PoseGraph2D graph_;
   int graph_loop_edges_ = 0;
   int optimized_loop_edges_ = 0;
