@@ -447,28 +447,25 @@ int main(int argc, char** argv) {
       fl::bench::Run mean;
       mean.name = in.name + " mean";
       mean.input = in.log;
-      std::string per_seed;
-      double worst = 0.0;
       for (const auto& [key, value] : seed_runs.front().metrics) {
         double sum = 0.0;
         for (const fl::bench::Run& r : seed_runs) sum += r.Get(key);
         mean.Add(key, sum / static_cast<double>(seed_runs.size()));
       }
+      std::string per_seed;
+      std::vector<double> ates;
       for (const fl::bench::Run& r : seed_runs) {
-        const double a = r.Get("ate_rmse_m");
-        worst = std::max(worst, a);
-        per_seed += (per_seed.empty() ? "" : ", ") + Metres(a);
+        ates.push_back(r.Get("ate_rmse_m"));
+        per_seed += (per_seed.empty() ? "" : ", ") + Metres(ates.back());
       }
       // The spread is heavy-tailed (most seeds agree, one may lock onto a wrong match): the
       // median is the typical run, the mean includes the bad ones.
-      std::vector<double> ates;
-      for (const fl::bench::Run& r : seed_runs) ates.push_back(r.Get("ate_rmse_m"));
       std::sort(ates.begin(), ates.end());
       const size_t n = ates.size();
       const double median = n % 2 ? ates[n / 2] : 0.5 * (ates[n / 2 - 1] + ates[n / 2]);
       mean.note = "mean of " + std::to_string(seed_runs.size()) + " runs (seeds " + seeds_text +
                   "); ATE per seed " + per_seed + " m, median " + Metres(median) + " m, worst " +
-                  Metres(worst) + " m";
+                  Metres(ates.back()) + " m";
       report.AddRun(mean);
     }
   }

@@ -269,11 +269,14 @@ void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res)
   res->T_world_base = particles_[best_].pose;
 }
 
-void RbpfSlam::Integrate(Particle* p) {
-  endpoints_world_.resize(hits_base_.size());
-  is_hit_.assign(hits_base_.size(), 1);
-  for (size_t k = 0; k < hits_base_.size(); ++k) endpoints_world_[k] = p->pose * hits_base_[k];
-  p->map.IntegrateScan(p->pose * T_base_laser_.translation(), endpoints_world_, is_hit_);
+void RbpfSlam::Integrate(Particle* p) { IntegrateInto(&p->map, p->pose, hits_base_); }
+
+void RbpfSlam::IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
+                             const std::vector<Eigen::Vector2d>& points_base) {
+  endpoints_world_.resize(points_base.size());
+  is_hit_.assign(points_base.size(), 1);
+  for (size_t k = 0; k < points_base.size(); ++k) endpoints_world_[k] = T_world_base * points_base[k];
+  map->IntegrateScan(T_world_base * T_base_laser_.translation(), endpoints_world_, is_hit_);
 }
 
 void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
@@ -526,24 +529,16 @@ void RbpfSlam::RebuildMaps() {
   // moves only the newest node), that rebuild's map is continued with the keyframes after them:
   // the same updates in the same order, so the same map.
   const int n = graph_.num_nodes();
-  const int cached = static_cast<int>(rebuild_poses_.size());
-  int same = 0;
-  while (same < cached && same < n) {
-    const fl::Pose2 a = graph_.pose(same), b = rebuild_poses_[same];
-    if (a.x != b.x || a.y != b.y || a.theta != b.theta) break;
-    ++same;
+  const int cached = static_cast<int>(rebuild_poses_.size());  // nodes only grow: cached <= n
+  bool reuse = cached > 0;
+  for (int k = 0; k < cached && reuse; ++k) {
+    const fl::Pose2 a = graph_.pose(k), b = rebuild_poses_[k];
+    reuse = a.x == b.x && a.y == b.y && a.theta == b.theta;
   }
-  const bool reuse = cached > 0 && same == cached;
   TiledGrid map = reuse ? rebuild_map_ : TiledGrid(opt_.grid);
   map.BeginBatch();
-  std::vector<Eigen::Vector2d> ends;
-  std::vector<uint8_t> hit;
   for (int k = reuse ? cached : 0; k < n; ++k) {
-    const fl::Pose2 T = graph_.pose(k);
-    ends.resize(keyframes_[k].points_base.size());
-    hit.assign(ends.size(), 1);
-    for (size_t i = 0; i < ends.size(); ++i) ends[i] = T * keyframes_[k].points_base[i];
-    map.IntegrateScan(T * T_base_laser_.translation(), ends, hit);
+    IntegrateInto(&map, graph_.pose(k), keyframes_[k].points_base);
   }
   map.EndBatch();
   if (reuse) ++stats_.map_rebuilds_continued;

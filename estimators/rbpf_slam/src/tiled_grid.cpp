@@ -250,8 +250,8 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     // do not erode it (and the likelihood field does not flicker). Every step of this
     // Bresenham line advances the major axis by one cell, so the end cell is max(dx, -dy) steps
     // away and the Chebyshev distance to it falls by one per step: a hit clears the first
-    // steps - margin cells, a free-space-only ray all steps + 1 (checked exhaustively against
-    // the per-cell distance test for every end cell within 40 cells and margins 0-3).
+    // steps - margin cells, a free-space-only ray all steps + 1 (test
+    // TiledGrid.RaysClearExactlyTheirBresenhamCellsUpToTheMargin checks it cell by cell).
     const int steps = std::max(dx, -dy);
     const int cells = is_hit[k] ? steps - opt_.free_space_margin : steps + 1;
     for (int n = 0; n < cells; ++n) {

@@ -119,6 +119,9 @@ class RbpfSlam {
   void ConvertScan(const LaserScan& scan, ScanResult* result);
   void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
   void Integrate(Particle* p);
+  // Integrates points (base frame) seen from T_world_base into map.
+  void IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
+                     const std::vector<Eigen::Vector2d>& points_base);
   void MaybeAddKeyframe(fl::Utime utime, ScanResult* result);
   void SearchLoopClosure(int kf, ScanResult* result);
   // Matches keyframe j against the submap around keyframe `cand` (correlative search, then
