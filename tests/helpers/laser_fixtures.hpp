@@ -41,7 +41,7 @@ class LaserWorld {
     w.AddBox(-9.6, -5.6, -9.0, -5.0);
     w.AddBox(-3.0, -6.0, -2.4, -5.4);
     w.AddBox(2.0, 5.2, 3.1, 6.0);
-    w.AddBox(8.5, 0.5, 10.0, 1.5);
+    w.AddBox(9.2, 0.5, 10.0, 1.5);  // clear of the loop path at x = 8.5
     w.AddBox(-10.0, 1.0, -9.4, 2.2);
     w.AddBox(4.0, -6.0, 4.4, -5.2);
     w.AddBox(-5.0, 5.5, -4.2, 6.0);
