@@ -133,7 +133,8 @@ TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
   // better than ICP from the filter's, so the check overrules the filter. The scenario is
   // chaotic (one bad keyframe spoils the rest), so the test looks at the median of five seeds:
   // with the check most seeds stay within decimetres (2026-11-30: 0.13-0.15 m on three of five,
-  // 2.3 and 3.6 m on the others), without it none does (6-23 m).
+  // 2.3 and 3.6 m on the others), without it none does (6-23 m). The lost-track search, a second
+  // safety net for the same failure, is off in both runs.
   const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
   test::LoopRunOptions lo;
   lo.step_m = 0.25;
@@ -149,6 +150,7 @@ TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
     o.matcher.max_correction_rad = 0.01;
     o.graph.divergence_check = check;
     o.graph.loop_search.enabled = false;
+    o.graph.recovery_search.enabled = false;  // the other safety net (tested on its own)
     RbpfSlam slam(o);
     for (size_t k = 0; k < run.utimes.size(); ++k) {
       ScanResult r;
@@ -176,6 +178,49 @@ TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
   EXPECT_GT(without[2], 5.0) << "the crippled filter should drift";
   EXPECT_LT(with[2], 0.5) << "median of five seeds";
   EXPECT_GT(without[0], 1.0) << "no seed should stay on track without the check";
+}
+
+TEST(RbpfSlam, LostTrackAfterAnOdometrySlipIsFoundOnTheMap) {
+  // Good odometry except one step whose heading is 0.45 rad off (a wheel slip), more than the
+  // matcher may correct (0.35 rad): the filter follows the odometry and is lost, and the
+  // divergence check sees nothing (filter and odometry agree). ICP against the previous
+  // keyframe fails; the correlative search finds where the scan fits, the map confirms it, and
+  // the filter is moved there. Without the search the rest of the loop is rotated by the slip.
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.odom_trans_noise = 0.005;
+  lo.odom_rot_noise = 0.002;
+  lo.odom_rot_bias = 0.0;
+  test::LoopRun run = test::MakeLoopRun(world, lo);
+  const size_t slip_at = 40;  // mid-way along the first corridor
+  const fl::Pose2 before_slip = run.odom[slip_at - 1];
+  for (size_t k = slip_at; k < run.odom.size(); ++k) {
+    run.odom[k] = before_slip * fl::Pose2(0.0, 0.0, 0.45) * before_slip.between(run.odom[k]);
+  }
+  auto max_error = [&](bool search, RbpfSlamStats* stats) {
+    RbpfSlamOptions o = TestOptions(5);
+    o.graph.recovery_search.enabled = search;
+    RbpfSlam slam(o);
+    for (size_t k = 0; k < run.utimes.size(); ++k) {
+      ScanResult r;
+      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    }
+    slam.Finish();
+    *stats = slam.stats();
+    const auto traj = slam.Trajectory();
+    double err = 0.0;
+    for (size_t k = 0; k < traj.size(); ++k) {
+      err = std::max(err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
+    }
+    return err;
+  };
+  RbpfSlamStats with_stats, without_stats;
+  const double with_search = max_error(true, &with_stats);
+  const double without_search = max_error(false, &without_stats);
+  EXPECT_GT(without_search, 1.0) << "the slip should leave the filter lost";
+  EXPECT_EQ(without_stats.recoveries, 0);
+  EXPECT_GE(with_stats.recoveries, 1);
+  EXPECT_LT(with_search, 0.3);
 }
 
 TEST(RbpfSlamBadInput, InvalidBeamsAreIgnored) {
@@ -272,10 +317,18 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
   o = RbpfSlamOptions();
   o.graph.divergence_min_gain = 1.5;
   EXPECT_NE(o.Validate().message().find("graph.divergence_min_gain"), std::string::npos);
+  // The two correlative searches are named apart.
+  o = RbpfSlamOptions();
+  o.graph.recovery_search.linear_window = 0.0;
+  EXPECT_NE(o.Validate().message().find("graph.recovery_search.linear_window"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.recovery_min_gain = -1.0;
+  EXPECT_NE(o.Validate().message().find("graph.recovery_min_gain"), std::string::npos);
   // Nested keys load from YAML; unknown nested keys are rejected.
   const RbpfSlamOptions y = fl::LoadYamlString<RbpfSlamOptions>(
       "graph:\n  loop_search:\n    linear_window: 1.5\n  divergence_check: false\n");
   EXPECT_DOUBLE_EQ(y.graph.loop_search.linear_window, 1.5);
+  EXPECT_DOUBLE_EQ(y.graph.recovery_search.linear_window, 0.5);  // its own defaults
   EXPECT_FALSE(y.graph.divergence_check);
   EXPECT_THROW(fl::LoadYamlString<RbpfSlamOptions>("graph:\n  loop_search:\n    window: 1\n"),
                fl::ConfigError);

@@ -404,6 +404,7 @@ int main(int argc, char** argv) {
             .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
             .Add("rebuilds_continued", static_cast<double>(st.map_rebuilds_continued))
             .Add("divergences", static_cast<double>(st.divergences))
+            .Add("recoveries", static_cast<double>(st.recoveries))
             .Add("resamples", static_cast<double>(st.resamples))
             .Add("degenerate_pct",
                  100.0 * static_cast<double>(st.degenerate_matches) /

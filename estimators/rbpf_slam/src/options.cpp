@@ -12,15 +12,15 @@ std::string Num(double v) {
   if (!s.empty() && s.back() == '.') s.pop_back();
   return s;
 }
-Status Positive(const char* key, double v) {
+Status Positive(const std::string& key, double v) {
   if (!(v > 0.0) || !std::isfinite(v)) {
-    return Status::Error(std::string(key) + " = " + Num(v) + " must be a positive number");
+    return Status::Error(key + " = " + Num(v) + " must be a positive number");
   }
   return Status::Ok();
 }
-Status NonNegative(const char* key, double v) {
+Status NonNegative(const std::string& key, double v) {
   if (!(v >= 0.0) || !std::isfinite(v)) {
-    return Status::Error(std::string(key) + " = " + Num(v) + " must be >= 0");
+    return Status::Error(key + " = " + Num(v) + " must be >= 0");
   }
   return Status::Ok();
 }
@@ -121,31 +121,33 @@ Status IcpOptions::Validate() const {
   return Status::Ok();
 }
 
-Status CorrelativeOptions::Validate() const {
-  FL_RETURN_IF_ERROR(Positive("graph.loop_search.linear_window", linear_window));
-  FL_RETURN_IF_ERROR(NonNegative("graph.loop_search.angular_window", angular_window));
-  FL_RETURN_IF_ERROR(NonNegative("graph.loop_search.angular_step", angular_step));
-  FL_RETURN_IF_ERROR(Positive("graph.loop_search.resolution", resolution));
-  FL_RETURN_IF_ERROR(Positive("graph.loop_search.sigma", sigma));
+Status CorrelativeOptions::Validate(const std::string& key) const {
+  FL_RETURN_IF_ERROR(Positive(key + ".linear_window", linear_window));
+  FL_RETURN_IF_ERROR(NonNegative(key + ".angular_window", angular_window));
+  FL_RETURN_IF_ERROR(NonNegative(key + ".angular_step", angular_step));
+  FL_RETURN_IF_ERROR(Positive(key + ".resolution", resolution));
+  FL_RETURN_IF_ERROR(Positive(key + ".sigma", sigma));
   if (linear_window / resolution > 200.0) {
     return Status::Error(
-        "graph.loop_search.linear_window / resolution = " + Num(linear_window / resolution) +
+        key + ".linear_window / resolution = " + Num(linear_window / resolution) +
         " translation steps per side is too many (max 200): widen the "
         "resolution or narrow the window");
   }
   if (coarse_factor < 1 || coarse_factor > 16) {
-    return Status::Error("graph.loop_search.coarse_factor = " + std::to_string(coarse_factor) +
+    return Status::Error(key + ".coarse_factor = " + std::to_string(coarse_factor) +
                          " must be in [1, 16]");
   }
-  if (max_points < 0) return Status::Error("graph.loop_search.max_points must be >= 0");
+  if (max_points < 0) return Status::Error(key + ".max_points must be >= 0");
   if (!(min_score >= 0.0 && min_score <= 1.0)) {
-    return Status::Error("graph.loop_search.min_score = " + Num(min_score) + " must be in [0, 1]");
+    return Status::Error(key + ".min_score = " + Num(min_score) + " must be in [0, 1]");
   }
   return Status::Ok();
 }
 
 Status GraphOptions::Validate() const {
   FL_RETURN_IF_ERROR(loop_search.Validate());
+  FL_RETURN_IF_ERROR(recovery_search.Validate("graph.recovery_search"));
+  FL_RETURN_IF_ERROR(NonNegative("graph.recovery_min_gain", recovery_min_gain));
   if (loop_max_candidates < 1) return Status::Error("graph.loop_max_candidates must be >= 1");
   if (!(divergence_min_gain >= 0.0 && divergence_min_gain <= 1.0)) {
     return Status::Error("graph.divergence_min_gain = " + Num(divergence_min_gain) +

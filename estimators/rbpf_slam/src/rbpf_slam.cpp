@@ -239,6 +239,10 @@ void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res)
   const std::vector<double> w = NormalizedWeights();
   res->neff = EffectiveSampleSize(w);
   best_ = BestIndex();
+  if (opt_.graph.enabled && opt_.graph.recovery_search.enabled &&
+      KeyframeDue(particles_[best_].pose)) {
+    pre_scan_map_ = particles_[best_].map;  // the resampled best particle's map, before the scan
+  }
   // 3. Adaptive resampling (eq. 4); 4. integrate the scan (once per distinct parent).
   if (res->neff < opt_.neff_threshold * static_cast<double>(particles_.size())) {
     ++stats_.resamples;
@@ -279,15 +283,19 @@ void RbpfSlam::IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
   map->IntegrateScan(T_world_base * T_base_laser_.translation(), endpoints_world_, is_hit_);
 }
 
+bool RbpfSlam::KeyframeDue(const fl::Pose2& pose) const {
+  if (keyframes_.empty()) return true;
+  const fl::Pose2 d = graph_.pose(static_cast<int>(keyframes_.size()) - 1).between(pose);
+  return std::hypot(d.x, d.y) >= opt_.graph.keyframe_distance ||
+         std::abs(d.theta) >= opt_.graph.keyframe_angle;
+}
+
 void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   const fl::Pose2 pose = particles_[best_].pose;
-  if (!keyframes_.empty()) {
-    const fl::Pose2 d = graph_.pose(static_cast<int>(keyframes_.size()) - 1).between(pose);
-    if (std::hypot(d.x, d.y) < opt_.graph.keyframe_distance &&
-        std::abs(d.theta) < opt_.graph.keyframe_angle) {
-      return;
-    }
-  }
+  // Held only for this scan's keyframe decision.
+  const std::optional<TiledGrid> pre_scan_map = std::move(pre_scan_map_);
+  pre_scan_map_.reset();
+  if (!KeyframeDue(pose)) return;
   Keyframe kf;
   kf.utime = utime;
   kf.points_base = hits_base_;
@@ -301,16 +309,17 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   res->new_keyframe = true;
   if (j == 0) return;
   const int i = j - 1;
-  fl::Pose2 prior = graph_.pose(i).between(pose);
+  const fl::Pose2 prior = graph_.pose(i).between(pose);
   PoseGraphEdge edge;
   edge.i = i;
   edge.j = j;
-  edge.T_i_j = prior;
   edge.information = WeakInformation();
+  bool edge_from_icp = false;
   if (opt_.graph.enabled) {
     IcpResult icp =
         AlignPointToLine(keyframes_[i].normals_base, keyframes_[j].points_base, prior, opt_.icp);
     bool icp_ok = NearStart(icp, prior);
+    bool moved_node = false;  // by the divergence check or the lost-track search
     if (opt_.graph.divergence_check) {
       // Did the filter lock onto a wrong match? ICP from the odometry's relative pose too.
       const fl::Pose2 odom_rel = keyframes_[i].odom.between(keyframes_[j].odom);
@@ -332,28 +341,82 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
             (std::hypot(moved.x, moved.y) > 0.1 || std::abs(moved.theta) > 0.05)) {
           // The filter diverged: move node j (and the particles) to where ICP puts it.
           ++stats_.divergences;
-          const fl::Pose2 corrected = graph_.pose(i) * best.T_ref_query;
-          const fl::Pose2 T_corr = corrected * pose.inverse();
-          graph_.set_pose(j, corrected);
-          for (Particle& p : particles_) p.pose = T_corr * p.pose;
           if (use_alt) icp = alt;
           icp_ok = true;
-          prior = icp.T_ref_query;
-          RebuildMaps();
-          ++stats_.map_rebuilds;
+          CorrectNewestKeyframe(j, pose, graph_.pose(i) * icp.T_ref_query);
+          moved_node = true;
         }
+      }
+    }
+    // ICP failed, or it put j far from the filter's pose: has the filter lost track?
+    const fl::Pose2 icp_moved = prior.between(icp.T_ref_query);
+    if (!moved_node && pre_scan_map &&
+        (!icp_ok || std::hypot(icp_moved.x, icp_moved.y) > 0.1 ||
+         std::abs(icp_moved.theta) > 0.05)) {
+      fl::Pose2 corrected;
+      IcpResult from_corrected;
+      if (SearchLostTrack(i, j, pose, *pre_scan_map, icp_ok ? &icp : nullptr, &corrected,
+                          &from_corrected)) {
+        ++stats_.recoveries;
+        CorrectNewestKeyframe(j, pose, corrected);
+        icp = from_corrected;
+        icp_ok = icp.ok;
       }
     }
     if (icp_ok) {
       edge.T_i_j = icp.T_ref_query;
       edge.information = GraphEdgeInformation(icp);
+      edge_from_icp = true;
       res->factors.push_back(Factor(i, j, icp, false));
     } else {
       ++stats_.icp_failures;
     }
   }
+  // Without ICP, a weak edge holds j where it is (the filter's pose, or the recovered one).
+  if (!edge_from_icp) edge.T_i_j = graph_.pose(i).between(graph_.pose(j));
   graph_.AddEdge(edge);
   if (opt_.graph.enabled) SearchLoopClosure(j, res);
+}
+
+bool RbpfSlam::SearchLostTrack(int i, int j, const fl::Pose2& pose,
+                               const TiledGrid& map_before_scan, const IcpResult* icp_from_filter,
+                               fl::Pose2* corrected, IcpResult* icp) const {
+  const GraphOptions& g = opt_.graph;
+  const fl::Pose2 T_world_i = graph_.pose(i);
+  // Candidate: where ICP from the filter's pose went, or, if it failed, the best pose of a wide
+  // search of j's scan against i's around the filter's pose; refined on the map (whose many
+  // scans constrain it better than one keyframe).
+  fl::Pose2 start;
+  if (icp_from_filter) {
+    start = T_world_i * icp_from_filter->T_ref_query;
+  } else {
+    const CorrelativeResult cr = CorrelativeMatch(keyframes_[i].points_base,
+                                                  keyframes_[j].points_base,
+                                                  T_world_i.between(pose), g.recovery_search);
+    if (!cr.ok || cr.at_window_edge || cr.score < g.recovery_search.min_score) return false;
+    start = T_world_i * cr.T_ref_query;
+  }
+  const MatchResult mr = MatchScan(map_before_scan, match_base_, start, opt_.matcher);
+  const fl::Pose2 candidate = mr.ok ? mr.T_world_base : start;
+  // The map decides: the scan must fit it clearly better there than where the filter put it.
+  const double n = static_cast<double>(match_base_.size());
+  const double gain =
+      (ScanLogLikelihood(map_before_scan, match_base_, candidate, opt_.matcher) -
+       ScanLogLikelihood(map_before_scan, match_base_, pose, opt_.matcher)) / n;
+  if (!(gain >= g.recovery_min_gain)) return false;
+  *corrected = candidate;
+  const fl::Pose2 T_i_j = T_world_i.between(candidate);
+  *icp = AlignPointToLine(keyframes_[i].normals_base, keyframes_[j].points_base, T_i_j, opt_.icp);
+  icp->ok = NearStart(*icp, T_i_j);
+  return true;
+}
+
+void RbpfSlam::CorrectNewestKeyframe(int j, const fl::Pose2& pose, const fl::Pose2& corrected) {
+  const fl::Pose2 T_corr = corrected * pose.inverse();
+  graph_.set_pose(j, corrected);
+  for (Particle& p : particles_) p.pose = T_corr * p.pose;
+  RebuildMaps();
+  ++stats_.map_rebuilds;
 }
 
 KeyframeFactor RbpfSlam::Factor(int i, int j, const IcpResult& icp, bool is_loop_closure) const {

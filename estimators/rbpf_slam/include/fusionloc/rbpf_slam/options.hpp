@@ -179,8 +179,20 @@ struct CorrelativeOptions {
     a->Visit("max_points", &max_points);
     a->Visit("min_score", &min_score);
   }
-  Status Validate() const;
+  // `key` names the struct in the error messages (it is used twice in GraphOptions).
+  Status Validate(const std::string& key = "graph.loop_search") const;
 };
+
+// Defaults of the lost-track search (GraphOptions::recovery_search): a window around the
+// filter's pose as wide as an odometry error the matcher cannot correct (its basin is
+// matcher.max_correction_*), and no score floor (the map decides, see recovery_min_gain).
+inline CorrelativeOptions RecoverySearchDefaults() {
+  CorrelativeOptions o;
+  o.linear_window = 0.5;
+  o.angular_window = 0.5;
+  o.min_score = 0.0;
+  return o;
+}
 
 struct GraphOptions {
   bool enabled = true;                 // [-] false: plain RBPF, no keyframe graph
@@ -215,6 +227,16 @@ struct GraphOptions {
                                        //     a wrong match: its pose is corrected and its maps
                                        //     rebuilt from the keyframes
   double divergence_min_gain = 0.05;   // [-] inlier-fraction gain that counts as "clearly"
+  // Lost track (an odometry error beyond the matcher's reach, e.g. a 0.36 rad heading error in
+  // one step): when ICP of a new keyframe against the previous one fails, the keyframe's scan
+  // is searched against the previous keyframe's (correlative search, then scan-to-map match
+  // from its best pose); if the scan fits the filter's map (before this scan entered it) better
+  // there by recovery_min_gain per beam, the filter was lost: its pose is corrected and its
+  // maps rebuilt from the keyframes (as for a divergence).
+  CorrelativeOptions recovery_search = RecoverySearchDefaults();  // enabled: false = off
+  double recovery_min_gain = 0.5;      // [-] mean log-likelihood gain per beam that counts
+                                       //     (the scan-to-map fit of a keyframe varies by
+                                       //     ~0.2 per beam between neighbouring poses)
 
   template <class A>
   void Serialize(A* a) {
@@ -237,6 +259,8 @@ struct GraphOptions {
     a->Visit("loop_search", &loop_search);
     a->Visit("divergence_check", &divergence_check);
     a->Visit("divergence_min_gain", &divergence_min_gain);
+    a->Visit("recovery_search", &recovery_search);
+    a->Visit("recovery_min_gain", &recovery_min_gain);
   }
   Status Validate() const;
 };

@@ -18,6 +18,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -62,6 +63,7 @@ struct RbpfSlamStats {
   int64_t map_rebuilds = 0;             // corrections fed back to the filter
   int64_t map_rebuilds_continued = 0;   // ... that continued the previous rebuild's map
   int64_t divergences = 0;              // keyframes where ICP from odometry overruled the filter
+  int64_t recoveries = 0;               // keyframes where the lost-track search moved the filter
 };
 
 class RbpfSlam {
@@ -122,7 +124,20 @@ class RbpfSlam {
   // Integrates points (base frame) seen from T_world_base into map.
   void IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
                      const std::vector<Eigen::Vector2d>& points_base);
+  // Whether a best-particle pose would become a keyframe (distance or angle from the last).
+  bool KeyframeDue(const fl::Pose2& pose) const;
   void MaybeAddKeyframe(fl::Utime utime, ScanResult* result);
+  // Lost-track search for new keyframe j (options.hpp, recovery_*), `map_before_scan` the best
+  // particle's map before j's scan entered it, `icp_from_filter` the successful ICP against
+  // keyframe i from the filter's pose (nullptr if it failed: then a correlative search
+  // proposes the candidate): true if the filter's pose `pose` should move to `*corrected`;
+  // `*icp` is then ICP against keyframe i from there (ok false if it failed).
+  bool SearchLostTrack(int i, int j, const fl::Pose2& pose, const TiledGrid& map_before_scan,
+                       const IcpResult* icp_from_filter, fl::Pose2* corrected,
+                       IcpResult* icp) const;
+  // Moves the newest keyframe j from `pose` to `corrected`, the particles with it, and
+  // rebuilds their maps from the keyframes.
+  void CorrectNewestKeyframe(int j, const fl::Pose2& pose, const fl::Pose2& corrected);
   void SearchLoopClosure(int kf, ScanResult* result);
   // Matches keyframe j against the submap around keyframe `cand` (correlative search, then
   // ICP); true and the ICP result if verified.
@@ -157,6 +172,9 @@ class RbpfSlam {
   std::vector<uint8_t> is_hit_;
 
   std::vector<Keyframe> keyframes_;
+  // The best particle's map before the scan of a keyframe-to-be entered it (lost-track search);
+  // a copy-on-write copy, held only until the keyframe is added.
+  std::optional<TiledGrid> pre_scan_map_;
   // The last map rebuild and the keyframe poses it used (RebuildMaps continues it when they
   // did not change).
   TiledGrid rebuild_map_;
