@@ -5,7 +5,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <unordered_map>
+#include <utility>
+#include <vector>
 
 #include "fusionloc/rbpf_slam/scan_matcher.hpp"
 
@@ -105,23 +106,48 @@ int IcpCovariance(const Eigen::Matrix3d& H, const Eigen::Matrix3d& M, int n, dou
 }
 
 namespace {
-// A uniform hash grid over the reference points for nearest-neighbour queries.
+// A uniform grid over the reference points for nearest-neighbour queries, stored flat: the
+// points' indices sorted by cell (within a cell in input order), and an open-addressing table
+// from a cell to its range. Memory grows with the points, not with the area they span.
 class PointHash {
  public:
   PointHash(const std::vector<PointNormal>& pts, double cell) : pts_(pts), inv_(1.0 / cell) {
-    for (size_t i = 0; i < pts.size(); ++i)
-      map_[Key(Cell(pts[i].p.x()), Cell(pts[i].p.y()))].push_back(static_cast<int>(i));
+    std::vector<std::pair<int64_t, int>> keyed(pts.size());
+    for (size_t i = 0; i < pts.size(); ++i) {
+      keyed[i] = {Key(Cell(pts[i].p.x()), Cell(pts[i].p.y())), static_cast<int>(i)};
+    }
+    std::sort(keyed.begin(), keyed.end());  // by cell, then by index: input order in a cell
+    order_.resize(keyed.size());
+    for (size_t i = 0; i < keyed.size(); ++i) {
+      order_[i] = keyed[i].second;
+      if (i == 0 || keyed[i].first != keyed[i - 1].first) {
+        cell_keys_.push_back(keyed[i].first);
+        cell_start_.push_back(static_cast<int>(i));
+      }
+    }
+    cell_start_.push_back(static_cast<int>(keyed.size()));
+    int bits = 4;
+    while ((size_t{1} << bits) < 2 * cell_keys_.size()) ++bits;
+    shift_ = 64 - bits;
+    slots_.assign(size_t{1} << bits, -1);
+    for (size_t c = 0; c < cell_keys_.size(); ++c) {
+      size_t h = Slot(cell_keys_[c]);
+      while (slots_[h] >= 0) h = (h + 1) & (slots_.size() - 1);
+      slots_[h] = static_cast<int>(c);
+    }
   }
-  // Index of the nearest reference point within max_d, or -1.
+  // Index of the nearest reference point within max_d, or -1 (ties: the first in the order of
+  // the neighbouring cells, then of the input).
   int Nearest(const Eigen::Vector2d& q, double max_d) const {
     const int cx = Cell(q.x()), cy = Cell(q.y());
     int best = -1;
     double best_d2 = max_d * max_d;
     for (int dy = -1; dy <= 1; ++dy) {
       for (int dx = -1; dx <= 1; ++dx) {
-        const auto it = map_.find(Key(cx + dx, cy + dy));
-        if (it == map_.end()) continue;
-        for (int i : it->second) {
+        const int c = Find(Key(cx + dx, cy + dy));
+        if (c < 0) continue;
+        for (int k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
+          const int i = order_[k];
           const double d2 = (pts_[i].p - q).squaredNorm();
           if (d2 < best_d2) {
             best_d2 = d2;
@@ -140,9 +166,23 @@ class PointHash {
     return static_cast<int64_t>((static_cast<uint64_t>(static_cast<uint32_t>(x)) << 32) |
                                 static_cast<uint64_t>(static_cast<uint32_t>(y)));
   }
+  size_t Slot(int64_t key) const {  // Fibonacci hashing: the top bits of key * 2^64/φ
+    return static_cast<size_t>((static_cast<uint64_t>(key) * 0x9E3779B97F4A7C15ull) >> shift_);
+  }
+  int Find(int64_t key) const {
+    for (size_t h = Slot(key);; h = (h + 1) & (slots_.size() - 1)) {
+      const int c = slots_[h];
+      if (c < 0) return -1;
+      if (cell_keys_[c] == key) return c;
+    }
+  }
   const std::vector<PointNormal>& pts_;
   double inv_;
-  std::unordered_map<int64_t, std::vector<int>> map_;
+  std::vector<int> order_;          // point indices sorted by cell
+  std::vector<int64_t> cell_keys_;  // distinct cells, ascending
+  std::vector<int> cell_start_;     // cell c's points: order_[cell_start_[c] .. cell_start_[c+1])
+  std::vector<int> slots_;          // open addressing (load <= 1/2): cell index or -1
+  int shift_ = 60;
 };
 }  // namespace
 
@@ -157,7 +197,12 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
                 std::to_string(query.size()) + ", need " + std::to_string(o.min_points) + ")";
     return r;
   }
-  const PointHash hash(reference, o.max_correspondence_m);
+  // Cells as large as the pairing distance, so the 3 x 3 neighbourhood holds every point within
+  // it: one grid for the wide first iterations, one for the final distance (about a tenth of
+  // the candidates to test). The factor keeps the final cell above max_d's rounding.
+  const PointHash coarse_hash(reference, o.max_correspondence_m);
+  const double fine_cell = o.final_correspondence_m * (1.0 + 1e-9);
+  const PointHash fine_hash(reference, fine_cell);
   double query_sq = 0.0;
   for (const Eigen::Vector2d& q : query) query_sq += q.squaredNorm();
   const double length_m = std::sqrt(query_sq / static_cast<double>(query.size()));
@@ -178,7 +223,7 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
     pairs = 0;
     for (const Eigen::Vector2d& q : query) {
       const Eigen::Vector2d w(T.x + c * q.x() - s * q.y(), T.y + s * q.x() + c * q.y());
-      const int j = hash.Nearest(w, max_d);
+      const int j = (max_d <= fine_cell ? fine_hash : coarse_hash).Nearest(w, max_d);
       if (j < 0) continue;
       const Eigen::Vector2d& n = reference[j].n;
       const double e = n.dot(w - reference[j].p);
@@ -226,7 +271,7 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
     for (size_t i = 0; i < query.size(); ++i) {
       const Eigen::Vector2d& q = query[i];
       const Eigen::Vector2d w(T.x + c * q.x() - s * q.y(), T.y + s * q.x() + c * q.y());
-      const int j = hash.Nearest(w, o.final_correspondence_m);
+      const int j = fine_hash.Nearest(w, o.final_correspondence_m);
       if (j < 0) continue;
       const Eigen::Vector2d& nj = reference[j].n;
       const double e = nj.dot(w - reference[j].p);
