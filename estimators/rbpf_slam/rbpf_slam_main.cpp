@@ -244,6 +244,7 @@ int main(int argc, char** argv) {
     status.Set("loop_closures", static_cast<double>(s.loop_closures));
     status.Set("divergences", static_cast<double>(s.divergences));
     status.Set("recoveries", static_cast<double>(s.recoveries));
+    status.Set("skipped_fast_turn", static_cast<double>(s.skipped_fast_turn));
     status.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
     status.Set("invalid_beams", static_cast<double>(s.invalid_beams));
     status.SetState(fusionloc::status_t::LEVEL_OK, "running");
@@ -292,6 +293,7 @@ int main(int argc, char** argv) {
                << ", loop closures " << s.loop_closures << " (of " << s.loop_candidates
                << " candidates), divergences caught " << s.divergences
                << ", lost-track recoveries " << s.recoveries
+               << ", scans held back in fast turns " << s.skipped_fast_turn
                << ", dropped (time) " << s.dropped_time_backwards
                << ", rejected " << s.rejected_bad_scan << ", odometry jumps " << s.odometry_jumps;
   status.Tick(true);

@@ -151,6 +151,7 @@ TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
     o.graph.divergence_check = check;
     o.graph.loop_search.enabled = false;
     o.graph.recovery_search.enabled = false;  // the other safety net (tested on its own)
+    o.max_turn_rate = 0.0;  // every scan goes to the filter (the turn gate is tested on its own)
     RbpfSlam slam(o);
     for (size_t k = 0; k < run.utimes.size(); ++k) {
       ScanResult r;
@@ -200,6 +201,8 @@ TEST(RbpfSlam, LostTrackAfterAnOdometrySlipIsFoundOnTheMap) {
   auto max_error = [&](bool search, RbpfSlamStats* stats) {
     RbpfSlamOptions o = TestOptions(5);
     o.graph.recovery_search.enabled = search;
+    // The slip's scan goes to the filter (the turn gate would hold it back: 4.5 rad/s).
+    o.max_turn_rate = 0.0;
     RbpfSlam slam(o);
     for (size_t k = 0; k < run.utimes.size(); ++k) {
       ScanResult r;
@@ -221,6 +224,59 @@ TEST(RbpfSlam, LostTrackAfterAnOdometrySlipIsFoundOnTheMap) {
   EXPECT_EQ(without_stats.recoveries, 0);
   EXPECT_GE(with_stats.recoveries, 1);
   EXPECT_LT(with_search, 0.3);
+}
+
+TEST(RbpfSlam, ScansTakenInFastTurnsWaitForTheNextScan) {
+  // The loop's corners are turns in place at 1.5 rad/s (0.15 rad per scan at 10 Hz). With
+  // max_turn_rate 1 rad/s the filter uses none of those scans: the turn's odometry accumulates
+  // and the first scan after it is matched with the whole turn as its motion. The loop must
+  // still close.
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  RbpfSlamOptions o = TestOptions(10);
+  ASSERT_EQ(o.max_turn_rate, 1.0);  // the default
+  RbpfSlam slam(o);
+  int fast = 0;
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    ASSERT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    if (k > 0 && std::abs(run.odom[k - 1].between(run.odom[k]).theta) > 0.1) {  // > 1 rad/s
+      ++fast;
+      EXPECT_FALSE(r.processed) << "scan " << k << " was taken in a fast turn";
+    }
+  }
+  slam.Finish();
+  EXPECT_GT(fast, 20);
+  EXPECT_GT(slam.stats().skipped_fast_turn, 20);
+  EXPECT_LE(slam.stats().skipped_fast_turn, fast);
+  EXPECT_GE(slam.stats().loop_closures, 1);
+  const auto traj = slam.Trajectory();
+  double max_err = 0.0;
+  for (size_t k = 0; k < traj.size(); ++k) {
+    max_err = std::max(max_err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
+  }
+  EXPECT_LT(max_err, 0.3);
+}
+
+TEST(RbpfSlam, TurnGateHoldsBackOnlyScansOfADenseStream) {
+  // A 0.9 rad turn between two scans is 4.5 rad/s if they are 0.2 s apart (held back) and
+  // 1.5 rad/s if they are 0.6 s apart: still over max_turn_rate, but beyond turn_skip_max_gap
+  // (0.3 s) the next scan is too far away to wait for, so the filter uses it.
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  const fl::Pose2 before(-8.5, -4.5, 0.0), after(-8.5, -4.5, 0.9);
+  std::mt19937 rng(3);
+  const auto scan_before = world.Scan(before, 181, -M_PI / 2, M_PI / 180, 25.0, 0.01, &rng);
+  const auto scan_after = world.Scan(after, 181, -M_PI / 2, M_PI / 180, 25.0, 0.01, &rng);
+  for (const fl::Utime gap : {fl::Utime{200000}, fl::Utime{600000}}) {
+    RbpfSlam slam(TestOptions(2));
+    ScanResult r;
+    ASSERT_TRUE(slam.AddScan(MakeScan(1000000, scan_before), before, &r).ok());
+    ASSERT_TRUE(slam.AddScan(MakeScan(1000000 + gap, scan_after), after, &r).ok());
+    EXPECT_EQ(r.processed, gap > 300000) << "gap " << gap << " us";
+    EXPECT_EQ(slam.stats().skipped_fast_turn, gap > 300000 ? 0 : 1);
+  }
 }
 
 TEST(RbpfSlamBadInput, InvalidBeamsAreIgnored) {

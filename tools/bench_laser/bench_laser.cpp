@@ -405,6 +405,7 @@ int main(int argc, char** argv) {
             .Add("rebuilds_continued", static_cast<double>(st.map_rebuilds_continued))
             .Add("divergences", static_cast<double>(st.divergences))
             .Add("recoveries", static_cast<double>(st.recoveries))
+            .Add("skipped_fast_turn", static_cast<double>(st.skipped_fast_turn))
             .Add("resamples", static_cast<double>(st.resamples))
             .Add("degenerate_pct",
                  100.0 * static_cast<double>(st.degenerate_matches) /

@@ -174,6 +174,7 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
     return Status::Ok();
   }
 
+  const double dt_s = 1e-6 * static_cast<double>(scan.utime - last_utime_);
   last_utime_ = scan.utime;
   // --- Odometry step since the previous scan; a jump is replaced by "no motion" plus noise.
   const fl::Pose2 step = last_odom_raw_.between(odom_pose);
@@ -189,7 +190,12 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
   const fl::Pose2 delta = odom_at_processed_.between(odom_);
   const bool moved = std::hypot(delta.x, delta.y) >= opt_.linear_update ||
                      std::abs(delta.theta) >= opt_.angular_update;
-  if (moved || pending_jump_) {
+  // A scan taken in a fast turn of a dense scan stream waits for the next one (the motion
+  // accumulates): its content may not match its time stamp.
+  const bool fast_turn = opt_.max_turn_rate > 0.0 && dt_s <= opt_.turn_skip_max_gap &&
+                         std::abs(step.theta) > opt_.max_turn_rate * dt_s;
+  if (fast_turn && (moved || pending_jump_)) ++stats_.skipped_fast_turn;
+  if ((moved || pending_jump_) && !fast_turn) {
     ProcessFilter(delta, pending_jump_, res);
     pending_jump_ = false;
     odom_at_processed_ = odom_;

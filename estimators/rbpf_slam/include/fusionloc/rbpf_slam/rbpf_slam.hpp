@@ -51,6 +51,7 @@ struct RbpfSlamStats {
   int64_t dropped_time_backwards = 0;   // scans whose time did not increase
   int64_t rejected_bad_scan = 0;        // beam count / geometry changed, non-finite odometry
   int64_t invalid_beams = 0;            // NaN / inf / zero / over-range beams ignored
+  int64_t skipped_fast_turn = 0;        // scans not used: odometry turning > max_turn_rate
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates that fell back to odometry
