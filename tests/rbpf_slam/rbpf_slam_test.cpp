@@ -54,6 +54,25 @@ RbpfSlamOptions TestOptions(int particles) {
   return o;
 }
 
+// Runs a whole simulated drive through a filter with options `o`; returns the largest error of
+// its final trajectory against the truth and (optionally) its stats.
+double MaxTrajectoryError(const RbpfSlamOptions& o, const test::LoopRun& run,
+                          RbpfSlamStats* stats = nullptr) {
+  RbpfSlam slam(o);
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+  }
+  slam.Finish();
+  if (stats) *stats = slam.stats();
+  const auto traj = slam.Trajectory();
+  double err = 0.0;
+  for (size_t k = 0; k < traj.size(); ++k) {
+    err = std::max(err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
+  }
+  return err;
+}
+
 TEST(RbpfSlam, ResamplesOnlyWhenNeffDropsBelowTheThreshold) {
   const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
   test::LoopRunOptions lo;
@@ -152,19 +171,7 @@ TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
     o.graph.loop_search.enabled = false;
     o.graph.recovery_search.enabled = false;  // the other safety net (tested on its own)
     o.max_turn_rate = 0.0;  // every scan goes to the filter (the turn gate is tested on its own)
-    RbpfSlam slam(o);
-    for (size_t k = 0; k < run.utimes.size(); ++k) {
-      ScanResult r;
-      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
-    }
-    slam.Finish();
-    *stats = slam.stats();
-    const auto traj = slam.Trajectory();
-    double err = 0.0;
-    for (size_t k = 0; k < traj.size(); ++k) {
-      err = std::max(err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
-    }
-    return err;
+    return MaxTrajectoryError(o, run, stats);
   };
   std::vector<double> with, without;
   for (int seed : {1, 2, 3, 4, 42}) {
@@ -203,19 +210,7 @@ TEST(RbpfSlam, LostTrackAfterAnOdometrySlipIsFoundOnTheMap) {
     o.graph.recovery_search.enabled = search;
     // The slip's scan goes to the filter (the turn gate would hold it back: 4.5 rad/s).
     o.max_turn_rate = 0.0;
-    RbpfSlam slam(o);
-    for (size_t k = 0; k < run.utimes.size(); ++k) {
-      ScanResult r;
-      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
-    }
-    slam.Finish();
-    *stats = slam.stats();
-    const auto traj = slam.Trajectory();
-    double err = 0.0;
-    for (size_t k = 0; k < traj.size(); ++k) {
-      err = std::max(err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
-    }
-    return err;
+    return MaxTrajectoryError(o, run, stats);
   };
   RbpfSlamStats with_stats, without_stats;
   const double with_search = max_error(true, &with_stats);
