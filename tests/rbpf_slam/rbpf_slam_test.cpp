@@ -145,6 +145,72 @@ TEST(RbpfSlam, SimulatedLoopIsClosed) {
   EXPECT_LT(max_err, 0.25);
 }
 
+TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
+  // The first 10 m of the loop (no loop closure yet, so no optimisation moves a keyframe): next
+  // to each successful sequential ICP edge there is a filter edge with the filter's relative
+  // pose at the time and the documented std for the odometry's motion (d, dθ) between the two
+  // keyframes: k (srr d + srt |dθ|) in x and y, k (stt |dθ| + str d) in heading, at least the
+  // minimum.
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  for (bool filter_edges : {true, false}) {
+    RbpfSlamOptions o = TestOptions(5);
+    o.graph.filter_edges = filter_edges;
+    RbpfSlam slam(o);
+    std::vector<fl::Pose2> created;  // each keyframe's pose when it was created
+    std::vector<fl::Pose2> odom;     // ... and the odometry then
+    for (size_t k = 0; k < 40; ++k) {
+      ScanResult r;
+      ASSERT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+      if (r.new_keyframe) {
+        created.push_back(slam.KeyframePoses().back().T_world_base);
+        odom.push_back(run.odom[k]);
+      }
+    }
+    ASSERT_EQ(slam.stats().loop_closures, 0);
+    ASSERT_GE(created.size(), 10u);
+    const PoseGraph2D& g = slam.graph();
+    ASSERT_EQ(g.num_nodes(), static_cast<int>(created.size()));
+    int filter = 0, icp = 0;
+    for (int j = 1; j < g.num_nodes(); ++j) {
+      std::vector<const PoseGraphEdge*> between;
+      for (const PoseGraphEdge& e : g.edges()) {
+        if (e.i == j - 1 && e.j == j) between.push_back(&e);
+      }
+      ASSERT_GE(between.size(), 1u);
+      ASSERT_LE(between.size(), filter_edges ? 2u : 1u);
+      icp += 1;
+      if (between.size() < 2) continue;
+      const PoseGraphEdge& fe = *between[1];
+      const fl::Pose2 rel = created[j - 1].between(created[j]);
+      EXPECT_NEAR(fe.T_i_j.x, rel.x, 1e-9);
+      EXPECT_NEAR(fe.T_i_j.y, rel.y, 1e-9);
+      EXPECT_NEAR(fe.T_i_j.theta, rel.theta, 1e-9);
+      const fl::Pose2 moved = odom[j - 1].between(odom[j]);
+      const double d = std::hypot(moved.x, moved.y), a = std::abs(moved.theta);
+      const double k = o.graph.filter_edge_sigma_scale;
+      const double s_xy =
+          std::max(k * (o.motion.srr * d + o.motion.srt * a), o.graph.filter_edge_min_sigma_m);
+      const double s_th =
+          std::max(k * (o.motion.stt * a + o.motion.str * d), o.graph.filter_edge_min_sigma_rad);
+      EXPECT_NEAR(fe.information(0, 0), 1.0 / (s_xy * s_xy), 1e-6);
+      EXPECT_NEAR(fe.information(1, 1), 1.0 / (s_xy * s_xy), 1e-6);
+      EXPECT_NEAR(fe.information(2, 2), 1.0 / (s_th * s_th), 1e-6);
+      EXPECT_DOUBLE_EQ(fe.huber_scale, o.graph.filter_edge_huber);
+      EXPECT_FALSE(fe.loop_closure);
+      ++filter;
+    }
+    if (filter_edges) {
+      EXPECT_GE(filter, icp - 2) << "every keyframe pair whose ICP succeeded";
+      EXPECT_GE(filter, 8);
+    } else {
+      EXPECT_EQ(filter, 0);
+    }
+  }
+}
+
 TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
   // Nearly exact odometry, but a one-particle filter whose motion model samples heading errors
   // of ~0.1 rad per step and whose matcher may correct only 0.01 rad: the filter drifts away
@@ -372,6 +438,15 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
   o = RbpfSlamOptions();
   o.graph.recovery_search.linear_window = 0.0;
   EXPECT_NE(o.Validate().message().find("graph.recovery_search.linear_window"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.divergence_min_chi2 = -1.0;
+  EXPECT_NE(o.Validate().message().find("graph.divergence_min_chi2"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.filter_edge_min_sigma_m = 0.0;
+  EXPECT_NE(o.Validate().message().find("graph.filter_edge_min_sigma_m"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.filter_edge_sigma_scale = -2.0;
+  EXPECT_NE(o.Validate().message().find("graph.filter_edge_sigma_scale"), std::string::npos);
   o = RbpfSlamOptions();
   o.graph.recovery_min_gain = -1.0;
   EXPECT_NE(o.Validate().message().find("graph.recovery_min_gain"), std::string::npos);

@@ -309,6 +309,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
       ComputeNormals(kf.points_base, opt_.icp.normal_radius, opt_.icp.normal_max_eigen_ratio);
   kf.path_length = path_length_;
   kf.odom = odom_;
+  kf.odometry_jumps = stats_.odometry_jumps;
   keyframes_.push_back(std::move(kf));
   const int j = graph_.AddNode(pose);
   ++stats_.keyframes;
@@ -343,7 +344,11 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
         const bool corroborated =
             use_alt || (std::hypot(agree.x, agree.y) < 0.05 && std::abs(agree.theta) < 0.02);
         const fl::Pose2 moved = prior.between(best.T_ref_query);
-        if (alt_ok && corroborated &&
+        // The move must be significant in ICP's own calibrated information: along a corridor's
+        // axis, where a few door frames are all ICP sees, it is not evidence of a divergence.
+        const Eigen::Vector3d m(best.T_ref_query.x - prior.x, best.T_ref_query.y - prior.y,
+                                fl::WrapAngle(best.T_ref_query.theta - prior.theta));
+        if (alt_ok && corroborated && m.dot(best.information * m) >= opt_.graph.divergence_min_chi2 &&
             (std::hypot(moved.x, moved.y) > 0.1 || std::abs(moved.theta) > 0.05)) {
           // The filter diverged: move node j (and the particles) to where ICP puts it.
           ++stats_.divergences;
@@ -381,6 +386,12 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   // Without ICP, a weak edge holds j where it is (the filter's pose, or the recovered one).
   if (!edge_from_icp) edge.T_i_j = graph_.pose(i).between(graph_.pose(j));
   graph_.AddEdge(edge);
+  // Where ICP succeeded, a filter edge also holds j where the filter put it (it knows the
+  // corridor's axis from the odometry and the map); not across a flagged odometry jump.
+  if (edge_from_icp && opt_.graph.filter_edges &&
+      keyframes_[i].odometry_jumps == keyframes_[j].odometry_jumps) {
+    graph_.AddEdge(FilterEdge(i, j));
+  }
   if (opt_.graph.enabled) SearchLoopClosure(j, res);
 }
 
@@ -439,6 +450,26 @@ KeyframeFactor RbpfSlam::Factor(int i, int j, const IcpResult& icp, bool is_loop
   return f;
 }
 
+PoseGraphEdge RbpfSlam::FilterEdge(int i, int j) const {
+  const GraphOptions& g = opt_.graph;
+  const MotionOptions& m = opt_.motion;
+  PoseGraphEdge e;
+  e.i = i;
+  e.j = j;
+  e.T_i_j = graph_.pose(i).between(graph_.pose(j));
+  // The std grows with the odometry's motion (the motion model's noise, which the filter's
+  // particles sampled), not with the filter's (which includes any correction).
+  const fl::Pose2 odom = keyframes_[i].odom.between(keyframes_[j].odom);
+  const double d = std::hypot(odom.x, odom.y), r = std::abs(odom.theta);
+  const double k = g.filter_edge_sigma_scale;
+  const double s_xy = std::max(k * (m.srr * d + m.srt * r), g.filter_edge_min_sigma_m);
+  const double s_th = std::max(k * (m.stt * r + m.str * d), g.filter_edge_min_sigma_rad);
+  e.information = Eigen::Vector3d(1.0 / (s_xy * s_xy), 1.0 / (s_xy * s_xy), 1.0 / (s_th * s_th))
+                      .asDiagonal();
+  e.huber_scale = g.filter_edge_huber;
+  return e;
+}
+
 Eigen::Matrix3d RbpfSlam::GraphEdgeInformation(const IcpResult& icp) const {
   const double s = opt_.graph.edge_sigma;
   if (s <= 0.0) return icp.information;
@@ -494,6 +525,7 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
               .eigenvalues()(1);
       edge.huber_scale = std::max(1.0, g.loop_huber_m * std::sqrt(info_xy_max));
     }
+    edge.loop_closure = true;
     graph_.AddEdge(edge);
     added.emplace_back(graph_.num_edges() - 1, icp);
     ++graph_loop_edges_;
@@ -561,7 +593,7 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
     double worst_score = 1.0;
     for (int k = 0; k < graph_.num_edges(); ++k) {
       const PoseGraphEdge& e = graph_.edges()[k];
-      if (!e.enabled || e.huber_scale <= 0.0) continue;  // only loop edges are robust
+      if (!e.enabled || !e.loop_closure) continue;
       const fl::Pose2 err = graph_.EdgeError(k);
       const double score = std::max(std::hypot(err.x, err.y) / g.loop_max_residual_m,
                                     std::abs(err.theta) / g.loop_max_residual_rad);

@@ -56,6 +56,7 @@ struct PoseGraphEdge {
   Eigen::Matrix3d information = Eigen::Matrix3d::Identity();
   double huber_scale = 0.0;  // > 0: robust (Huber) loss with this scale on the whitened residual
   bool enabled = true;       // disabled edges are kept but not optimised (rejected loop closures)
+  bool loop_closure = false; // a loop closure (may be rejected after optimisation)
 };
 
 class PoseGraph2D {

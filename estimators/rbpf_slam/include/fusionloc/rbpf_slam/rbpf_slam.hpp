@@ -85,6 +85,8 @@ class RbpfSlam {
   // particle's motion since that keyframe.
   std::vector<StampedPose2> Trajectory() const;
   std::vector<StampedPose2> KeyframePoses() const;
+  // The keyframe pose graph (nodes = keyframes; ICP, filter, weak and loop-closure edges).
+  const PoseGraph2D& graph() const { return graph_; }
   // Map of the best particle.
   const TiledGrid& BestMap() const;
   std::vector<double> NormalizedWeights() const;
@@ -112,6 +114,7 @@ class RbpfSlam {
     std::vector<PointNormal> normals_base;
     double path_length;                       // [m] travelled when created
     fl::Pose2 odom;                           // odometry pose (flagged jumps removed) then
+    int64_t odometry_jumps = 0;               // flagged odometry jumps before it
   };
   struct Particle {
     fl::Pose2 pose;
@@ -144,6 +147,9 @@ class RbpfSlam {
   // ICP); true and the ICP result if verified.
   bool VerifyLoopClosure(int cand, int j, IcpResult* icp) const;
   Eigen::Matrix3d GraphEdgeInformation(const IcpResult& icp) const;
+  // The filter edge from keyframe i to the new keyframe j at their current graph poses
+  // (options.hpp, graph.filter_edges).
+  PoseGraphEdge FilterEdge(int i, int j) const;
   // The published factor of an ICP result between keyframes i and j (calibrated information).
   KeyframeFactor Factor(int i, int j, const IcpResult& icp, bool is_loop_closure) const;
   bool OptimizeAndFeedBack(ScanResult* result);
