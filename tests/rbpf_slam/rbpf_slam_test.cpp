@@ -439,9 +439,6 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
   o.graph.recovery_search.linear_window = 0.0;
   EXPECT_NE(o.Validate().message().find("graph.recovery_search.linear_window"), std::string::npos);
   o = RbpfSlamOptions();
-  o.graph.divergence_min_chi2 = -1.0;
-  EXPECT_NE(o.Validate().message().find("graph.divergence_min_chi2"), std::string::npos);
-  o = RbpfSlamOptions();
   o.graph.filter_edge_min_sigma_m = 0.0;
   EXPECT_NE(o.Validate().message().find("graph.filter_edge_min_sigma_m"), std::string::npos);
   o = RbpfSlamOptions();

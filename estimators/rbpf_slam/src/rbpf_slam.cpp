@@ -344,11 +344,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
         const bool corroborated =
             use_alt || (std::hypot(agree.x, agree.y) < 0.05 && std::abs(agree.theta) < 0.02);
         const fl::Pose2 moved = prior.between(best.T_ref_query);
-        // The move must be significant in ICP's own calibrated information: along a corridor's
-        // axis, where a few door frames are all ICP sees, it is not evidence of a divergence.
-        const Eigen::Vector3d m(best.T_ref_query.x - prior.x, best.T_ref_query.y - prior.y,
-                                fl::WrapAngle(best.T_ref_query.theta - prior.theta));
-        if (alt_ok && corroborated && m.dot(best.information * m) >= opt_.graph.divergence_min_chi2 &&
+        if (alt_ok && corroborated &&
             (std::hypot(moved.x, moved.y) > 0.1 || std::abs(moved.theta) > 0.05)) {
           // The filter diverged: move node j (and the particles) to where ICP puts it.
           ++stats_.divergences;
