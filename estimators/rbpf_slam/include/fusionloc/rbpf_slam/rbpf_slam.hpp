@@ -8,10 +8,11 @@
 //   3. N_eff = 1 / Σ w̃² ; systematic resampling only when N_eff < N_th (eq. 4);
 //   4. the scan is integrated into each particle's copy-on-write tiled map.
 // Keyframes (every keyframe_distance / keyframe_angle of the best particle) get a point-to-line
-// ICP factor to the previous keyframe, loop closures are searched by proximity and verified by
-// ICP against a local submap, the pose graph is optimised with Ceres and the correction is fed
-// back: the particles' maps are rebuilt from the corrected keyframes and their poses shifted
-// by the correction of the latest keyframe.
+// ICP factor to the previous keyframe (and, in the internal graph, a filter edge holding the
+// keyframe where the filter put it, for what ICP leaves free); loop closures are searched by
+// proximity and verified by ICP against a local submap; the pose graph is optimised with Ceres
+// and the correction is fed back: the particles' maps are rebuilt from the corrected keyframes
+// and their poses shifted by the correction of the latest keyframe.
 //
 // Not thread-safe; one instance per laser. No LCM: the process rbpf_slam_main.cpp adapts.
 #pragma once
