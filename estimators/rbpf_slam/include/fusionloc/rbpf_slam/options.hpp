@@ -224,16 +224,16 @@ struct GraphOptions {
   // j where the filter put it (after a divergence or lost-track correction), with the motion
   // model's std times filter_edge_sigma_scale: σ_xy = k (srr·d + srt·|Δθ|), σ_θ = k (stt·|Δθ| +
   // str·d) for the odometry's motion (d, Δθ) between the two keyframes, at least
-  // filter_edge_min_sigma_*; Huber-robust. ICP edges are strong where the
-  // scene constrains them and weak along a corridor's axis, where the few features ICP sees
-  // (door frames, range noise on the walls) may put it 0.2-0.5 m off (ACES); there the filter's
-  // estimate (odometry plus the scan-to-map match) holds the chain instead. Not added where ICP
-  // failed (the weak edge holds j there) or across a flagged odometry jump. On the laser
-  // benchmark (BENCHMARKS.md, 8 seeds, with loop_max_residual_m 0.3) they moved ACES 0.276 ->
-  // 0.228 m and raw CSAIL 0.126 -> 0.101 m, csail-corrected 0.109 -> 0.114 and intel 0.089 ->
-  // 0.096 m. Scale 1 (seeds 1-6) bent csail and intel more (0.142, 0.118 m). Odometry edges instead (the odometry's own
-  // relative pose) helped the synthetic-noise logs but pulled raw CSAIL, whose real odometry is
-  // biased (2 % short, turns 8 % short), from 0.12 to 0.23 m.
+  // filter_edge_min_sigma_*; Huber-robust. ICP edges are strong where the scene constrains
+  // them and weak along a corridor's axis, where the few features ICP sees (door frames, range
+  // noise on the walls) may put it 0.2-0.5 m off (ACES); there the filter's estimate (odometry
+  // plus the scan-to-map match) holds the chain instead. Not added where ICP failed (the weak
+  // edge holds j there) or across a flagged odometry jump. On the laser benchmark
+  // (BENCHMARKS.md, 8 seeds, with loop_max_residual_m 0.3) they moved ACES 0.276 -> 0.228 m and
+  // raw CSAIL 0.126 -> 0.101 m, csail-corrected 0.109 -> 0.114 and intel 0.089 -> 0.096 m.
+  // Scale 1 (seeds 1-6) bent csail and intel more (0.142, 0.118 m). Odometry edges instead (the
+  // odometry's own relative pose) helped the synthetic-noise logs but pulled raw CSAIL, whose
+  // real odometry is biased (2 % short, turns 8 % short), from 0.12 to 0.23 m.
   bool filter_edges = true;
   double filter_edge_sigma_scale = 2.0;      // [-] k
   double filter_edge_min_sigma_m = 0.02;     // [m]
