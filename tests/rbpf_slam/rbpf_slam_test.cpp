@@ -173,7 +173,7 @@ TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
     ASSERT_GE(created.size(), 10u);
     const PoseGraph2D& g = slam.graph();
     ASSERT_EQ(g.num_nodes(), static_cast<int>(created.size()));
-    int filter = 0, icp = 0;
+    int filter = 0, pairs = 0;  // filter edges, consecutive keyframe pairs
     for (int j = 1; j < g.num_nodes(); ++j) {
       std::vector<const PoseGraphEdge*> between;
       for (const PoseGraphEdge& e : g.edges()) {
@@ -181,7 +181,7 @@ TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
       }
       ASSERT_GE(between.size(), 1u);
       ASSERT_LE(between.size(), filter_edges ? 2u : 1u);
-      icp += 1;
+      ++pairs;
       if (between.size() < 2) continue;
       const PoseGraphEdge& fe = *between[1];
       const fl::Pose2 rel = created[j - 1].between(created[j]);
@@ -203,7 +203,7 @@ TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
       ++filter;
     }
     if (filter_edges) {
-      EXPECT_GE(filter, icp - 2) << "every keyframe pair whose ICP succeeded";
+      EXPECT_GE(filter, pairs - 2) << "every keyframe pair whose ICP succeeded";
       EXPECT_GE(filter, 8);
     } else {
       EXPECT_EQ(filter, 0);
