@@ -62,20 +62,23 @@ class LookupGrid {
     *cx = static_cast<int>(std::floor((p.x() - origin_.x()) / res_));
     *cy = static_cast<int>(std::floor((p.y() - origin_.y()) / res_));
   }
-  float Fine(int x, int y) const {
-    return Inside(x, y) ? fine_[static_cast<size_t>(y) * w_ + x] : 0.0f;
-  }
-  float Coarse(int x, int y) const {
-    return Inside(x, y) ? coarse_[static_cast<size_t>(y) * w_ + x] : 0.0f;
-  }
+  int width() const { return w_; }
+  int height() const { return h_; }
+  // Rows of the fine values L and the coarse maxima C (0 <= y < height()); outside the grid
+  // both are 0.
+  const float* FineRow(int y) const { return fine_.data() + static_cast<size_t>(y) * w_; }
+  const float* CoarseRow(int y) const { return coarse_.data() + static_cast<size_t>(y) * w_; }
 
  private:
-  bool Inside(int x, int y) const { return x >= 0 && y >= 0 && x < w_ && y < h_; }
   double res_;
   Eigen::Vector2d origin_;
   int w_ = 0, h_ = 0;
   std::vector<float> fine_, coarse_;
 };
+
+// Integer division rounding up / down, for any numerator and a positive denominator.
+int CeilDiv(int a, int b) { return a >= 0 ? (a + b - 1) / b : -((-a) / b); }
+int FloorDivPos(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 struct CoarseCandidate {
   float bound;
@@ -122,17 +125,36 @@ CorrelativeResult CorrelativeMatch(const std::vector<Eigen::Vector2d>& reference
   const int n_angles = 2 * na + 1;
   std::vector<std::vector<int>> cells(n_angles);
   std::vector<CoarseCandidate> cand;
+  const int nc = (2 * nt) / k + 1;  // coarse translations per axis: -nt, -nt + k, ... <= nt
+  std::vector<double> sums(static_cast<size_t>(nc) * nc);
   for (int a = 0; a < n_angles; ++a) {
     const double th = initial.theta + (a - na) * step;
     const fl::Pose2 T(initial.x, initial.y, th);
     std::vector<int>& c = cells[a];
     c.resize(2 * q.size());
     for (size_t i = 0; i < q.size(); ++i) grid.Cell(T * q[i], &c[2 * i], &c[2 * i + 1]);
-    for (int iy = -nt; iy <= nt; iy += k) {
-      for (int ix = -nt; ix <= nt; ix += k) {
-        double sum = 0.0;
-        for (size_t i = 0; i < q.size(); ++i) sum += grid.Coarse(c[2 * i] + ix, c[2 * i + 1] + iy);
-        cand.push_back({static_cast<float>(sum * inv_n), a, ix, iy});
+    // sums[row * nc + col] for the translation (ix, iy) = (-nt + col k, -nt + row k). The loop
+    // runs point by point (each point's row of the table is read in order); every sum still
+    // adds its points in the same order, and a point outside the grid adds 0, so it is skipped.
+    std::fill(sums.begin(), sums.end(), 0.0);
+    for (size_t i = 0; i < q.size(); ++i) {
+      const int cx = c[2 * i], cy = c[2 * i + 1];
+      // Columns whose x = cx - nt + col k lies in [0, w).
+      const int col0 = std::max(0, CeilDiv(-(cx - nt), k));
+      const int col1 = std::min(nc - 1, FloorDivPos(grid.width() - 1 - (cx - nt), k));
+      if (col0 > col1) continue;
+      for (int row = 0; row < nc; ++row) {
+        const int y = cy - nt + row * k;
+        if (y < 0 || y >= grid.height()) continue;
+        const float* line = grid.CoarseRow(y);
+        double* out_row = &sums[static_cast<size_t>(row) * nc];
+        for (int col = col0; col <= col1; ++col) out_row[col] += line[cx - nt + col * k];
+      }
+    }
+    for (int row = 0; row < nc; ++row) {
+      for (int col = 0; col < nc; ++col) {
+        cand.push_back({static_cast<float>(sums[static_cast<size_t>(row) * nc + col] * inv_n), a,
+                        -nt + col * k, -nt + row * k});
       }
     }
   }
@@ -141,15 +163,29 @@ CorrelativeResult CorrelativeMatch(const std::vector<Eigen::Vector2d>& reference
 
   // Expand coarse cells in order of their bound until none can beat the best exact score. Ties
   // go to the pose nearer the initial guess.
+  std::vector<double> block(static_cast<size_t>(k) * k);
   double best = -1.0, best_dist = 0.0;
   int best_a = na, best_x = 0, best_y = 0;
   for (const CoarseCandidate& cc : cand) {
     if (cc.bound + 1e-6 < best) break;
     const std::vector<int>& c = cells[cc.angle];
-    for (int iy = cc.iy; iy < cc.iy + k && iy <= nt; ++iy) {
-      for (int ix = cc.ix; ix < cc.ix + k && ix <= nt; ++ix) {
-        double sum = 0.0;
-        for (size_t i = 0; i < q.size(); ++i) sum += grid.Fine(c[2 * i] + ix, c[2 * i + 1] + iy);
+    // The block's translations: ix in [cc.ix, x_end), iy in [cc.iy, y_end); the sums run point by
+    // point as above.
+    const int x_end = std::min(cc.ix + k, nt + 1), y_end = std::min(cc.iy + k, nt + 1);
+    std::fill(block.begin(), block.end(), 0.0);
+    for (size_t i = 0; i < q.size(); ++i) {
+      const int cx = c[2 * i], cy = c[2 * i + 1];
+      const int ix0 = std::max(cc.ix, -cx), ix1 = std::min(x_end, grid.width() - cx);
+      if (ix0 >= ix1) continue;
+      for (int iy = std::max(cc.iy, -cy); iy < std::min(y_end, grid.height() - cy); ++iy) {
+        const float* line = grid.FineRow(cy + iy);
+        double* out_row = &block[static_cast<size_t>(iy - cc.iy) * k];
+        for (int ix = ix0; ix < ix1; ++ix) out_row[ix - cc.ix] += line[cx + ix];
+      }
+    }
+    for (int iy = cc.iy; iy < y_end; ++iy) {
+      for (int ix = cc.ix; ix < x_end; ++ix) {
+        const double sum = block[static_cast<size_t>(iy - cc.iy) * k + (ix - cc.ix)];
         ++out.evaluated;
         const double score = sum * inv_n;
         const double dist = std::hypot(ix * options.resolution, iy * options.resolution) +

@@ -234,6 +234,10 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
   const int ox = static_cast<int>(std::floor(origin_world.x() * inv_res_));
   const int oy = static_cast<int>(std::floor(origin_world.y() * inv_res_));
   const int step = std::max(1, opt_.free_space_beam_step);
+  // Copies of the members the inner loop reads: stores into int16 log-odds could alias them, so
+  // the compiler would reload them for every cell.
+  const int miss = miss_, neg_clamp = -clamp_, free_threshold = free_threshold_;
+  const int margin = opt_.free_space_margin;
   // Free space first for all beams, then the hits, so that a grazing ray of this scan does not
   // erase a wall cell another beam of the same scan hits.
   for (size_t k = 0; k < endpoints_world.size(); k += step) {
@@ -253,7 +257,7 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     // steps - margin cells, a free-space-only ray all steps + 1 (test
     // TiledGrid.RaysClearExactlyTheirBresenhamCellsUpToTheMargin checks it cell by cell).
     const int steps = std::max(dx, -dy);
-    const int cells = is_hit[k] ? steps - opt_.free_space_margin : steps + 1;
+    const int cells = is_hit[k] ? steps - margin : steps + 1;
     for (int n = 0; n < cells; ++n) {
       const int tx = x >> kTileBits, ty = y >> kTileBits;
       if (tx != ctx || ty != cty) {
@@ -263,10 +267,10 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
       }
       const int idx = LocalIndex(x, y);
       int16_t& l = tile->log_odds[idx];
-      int v = std::max<int>(-clamp_, l + miss_);
+      int v = std::max<int>(neg_clamp, l + miss);
       if (v == 0) v = -1;
       l = static_cast<int16_t>(v);
-      if (v < free_threshold_ && tile->dist[idx] == 0) {
+      if (v < free_threshold && tile->dist[idx] == 0) {
         tile->occupied -= 1;
         OnBecameFree(x, y);
       }
@@ -286,44 +290,6 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     UpdateCell(static_cast<int>(std::floor(endpoints_world[k].x() * inv_res_)),
                static_cast<int>(std::floor(endpoints_world[k].y() * inv_res_)), hit_);
   }
-}
-
-double TiledGrid::Distance(const Eigen::Vector2d& p, Eigen::Vector2d* gradient) const {
-  const double u = p.x() * inv_res_ - 0.5, v = p.y() * inv_res_ - 0.5;
-  const double fu = std::floor(u), fv = std::floor(v);
-  const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
-  const double a = u - fu, b = v - fv;
-  double d00, d10, d01, d11;
-  const Tile* t = TileAt(x0 >> kTileBits, y0 >> kTileBits);
-  if (((x0 + 1) & (kTileSize - 1)) != 0 && ((y0 + 1) & (kTileSize - 1)) != 0) {
-    // All four cells in one tile (the common case).
-    if (!t) {
-      if (gradient) gradient->setZero();
-      return opt_.field_max_distance;
-    }
-    const int i = LocalIndex(x0, y0);
-    d00 = t->dist[i];
-    d10 = t->dist[i + 1];
-    d01 = t->dist[i + kTileSize];
-    d11 = t->dist[i + kTileSize + 1];
-  } else {
-    d00 = RawDist(x0, y0);
-    d10 = RawDist(x0 + 1, y0);
-    d01 = RawDist(x0, y0 + 1);
-    d11 = RawDist(x0 + 1, y0 + 1);
-  }
-  const double scale = res_ / kDistScale;
-  const double d = ((1 - a) * (1 - b) * d00 + a * (1 - b) * d10 + (1 - a) * b * d01 + a * b * d11);
-  if (gradient) {
-    if (d * scale >= opt_.field_max_distance) {
-      gradient->setZero();
-      return opt_.field_max_distance;
-    }
-    const double gu = (1 - b) * (d10 - d00) + b * (d11 - d01);
-    const double gv = (1 - a) * (d01 - d00) + a * (d11 - d10);
-    *gradient = Eigen::Vector2d(gu, gv) * (scale * inv_res_);
-  }
-  return std::min(d * scale, opt_.field_max_distance);
 }
 
 bool TiledGrid::Bounds(int* min_cx, int* min_cy, int* max_cx, int* max_cy) const {

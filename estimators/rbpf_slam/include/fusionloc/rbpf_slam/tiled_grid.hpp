@@ -18,7 +18,9 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <utility>
@@ -130,5 +132,44 @@ class TiledGrid {
   std::shared_ptr<Tile> empty_;  // prototype of a fresh tile
   bool batch_ = false;           // inside BeginBatch() / EndBatch()
 };
+
+// Inline: the scan matcher calls it for every point of every iteration.
+inline double TiledGrid::Distance(const Eigen::Vector2d& p, Eigen::Vector2d* gradient) const {
+  const double u = p.x() * inv_res_ - 0.5, v = p.y() * inv_res_ - 0.5;
+  const double fu = std::floor(u), fv = std::floor(v);
+  const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
+  const double a = u - fu, b = v - fv;
+  double d00, d10, d01, d11;
+  const Tile* t = TileAt(x0 >> kTileBits, y0 >> kTileBits);
+  if (((x0 + 1) & (kTileSize - 1)) != 0 && ((y0 + 1) & (kTileSize - 1)) != 0) {
+    // All four cells in one tile (the common case).
+    if (!t) {
+      if (gradient) gradient->setZero();
+      return opt_.field_max_distance;
+    }
+    const int i = ((y0 & (kTileSize - 1)) << kTileBits) | (x0 & (kTileSize - 1));
+    d00 = t->dist[i];
+    d10 = t->dist[i + 1];
+    d01 = t->dist[i + kTileSize];
+    d11 = t->dist[i + kTileSize + 1];
+  } else {
+    d00 = RawDist(x0, y0);
+    d10 = RawDist(x0 + 1, y0);
+    d01 = RawDist(x0, y0 + 1);
+    d11 = RawDist(x0 + 1, y0 + 1);
+  }
+  const double scale = res_ / kDistScale;
+  const double d = ((1 - a) * (1 - b) * d00 + a * (1 - b) * d10 + (1 - a) * b * d01 + a * b * d11);
+  if (gradient) {
+    if (d * scale >= opt_.field_max_distance) {
+      gradient->setZero();
+      return opt_.field_max_distance;
+    }
+    const double gu = (1 - b) * (d10 - d00) + b * (d11 - d01);
+    const double gv = (1 - a) * (d01 - d00) + a * (d11 - d10);
+    *gradient = Eigen::Vector2d(gu, gv) * (scale * inv_res_);
+  }
+  return std::min(d * scale, opt_.field_max_distance);
+}
 
 }  // namespace fl::rbpf
