@@ -142,22 +142,52 @@ void TiledGrid::UpdateCell(int cx, int cy, int delta_scaled) {
   }
 }
 
+void TiledGrid::BeginBatch() {
+  batch_ = true;
+  batch_dirty_.clear();
+}
+
 void TiledGrid::EndBatch() {
   if (!batch_) return;
   batch_ = false;
-  // Reset every distance, then let each obstacle cell stamp its disk.
+  // Only obstacle changes in the batch move distances, and no farther than the field radius
+  // (< one tile): the cells to recompute lie in the tiles whose obstacles changed and their 8
+  // neighbours (`redo`), and the obstacles that can be nearest to them in `redo` and its
+  // neighbours (`source`). Outside `redo`, every stored distance is still right.
+  std::sort(batch_dirty_.begin(), batch_dirty_.end());
+  batch_dirty_.erase(std::unique(batch_dirty_.begin(), batch_dirty_.end()), batch_dirty_.end());
+  std::vector<std::pair<int, int>> redo, source;
+  for (const auto& [tx, ty] : batch_dirty_) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dx = -1; dx <= 1; ++dx) redo.emplace_back(tx + dx, ty + dy);
+    }
+  }
+  std::sort(redo.begin(), redo.end());
+  redo.erase(std::unique(redo.begin(), redo.end()), redo.end());
+  for (const auto& [tx, ty] : redo) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dx = -1; dx <= 1; ++dx) source.emplace_back(tx + dx, ty + dy);
+    }
+  }
+  std::sort(source.begin(), source.end());
+  source.erase(std::unique(source.begin(), source.end()), source.end());
+  batch_dirty_.clear();
+  // Reset the distances in `redo`, then let each obstacle cell of `source` stamp its disk.
+  for (const auto& [tx, ty] : redo) {
+    if (!TileAt(tx, ty)) continue;
+    Tile* t = MutableTile(tx, ty);
+    for (int k = 0; k < kTileCells; ++k) {
+      if (t->dist[k] != 0) t->dist[k] = static_cast<uint8_t>(dist_max_);
+    }
+  }
   std::vector<std::pair<int, int>> obstacles;
-  for (int iy = 0; iy < nty_; ++iy) {
-    for (int ix = 0; ix < ntx_; ++ix) {
-      if (!tiles_[static_cast<size_t>(iy) * ntx_ + ix]) continue;
-      Tile* t = MutableTile(ix + tx0_, iy + ty0_);
-      for (int k = 0; k < kTileCells; ++k) {
-        if (t->dist[k] == 0) {
-          obstacles.emplace_back((ix + tx0_) * kTileSize + (k & (kTileSize - 1)),
-                                 (iy + ty0_) * kTileSize + (k >> kTileBits));
-        } else {
-          t->dist[k] = static_cast<uint8_t>(dist_max_);
-        }
+  for (const auto& [tx, ty] : source) {
+    const Tile* t = TileAt(tx, ty);
+    if (!t) continue;
+    for (int k = 0; k < kTileCells; ++k) {
+      if (t->dist[k] == 0) {
+        obstacles.emplace_back(tx * kTileSize + (k & (kTileSize - 1)),
+                               ty * kTileSize + (k >> kTileBits));
       }
     }
   }
@@ -167,6 +197,7 @@ void TiledGrid::EndBatch() {
 void TiledGrid::OnBecameOccupied(int cx, int cy) {
   if (batch_) {  // only the obstacle flag; EndBatch() computes the field
     SetRawDist(cx, cy, 0);
+    batch_dirty_.emplace_back(cx >> kTileBits, cy >> kTileBits);
     return;
   }
   // Row-major offsets: consecutive cells share a tile, which is looked up (and made writable)
@@ -196,6 +227,7 @@ void TiledGrid::OnBecameOccupied(int cx, int cy) {
 void TiledGrid::OnBecameFree(int cx, int cy) {
   if (batch_) {  // any value but 0; EndBatch() computes the field
     SetRawDist(cx, cy, dist_max_);
+    batch_dirty_.emplace_back(cx >> kTileBits, cy >> kTileBits);
     return;
   }
   // Only cells whose nearest obstacle was this one (stored distance == distance to it) change;

@@ -77,8 +77,10 @@ class TiledGrid {
   // log-odds and obstacle flags are updated as usual but the distance field is not; EndBatch()
   // recomputes it once for the whole grid. The result is identical to integrating the scans one
   // by one, and much cheaper, since no cell's distance is repaired again and again as obstacles
-  // come and go. Distance() is not valid inside a batch.
-  void BeginBatch() { batch_ = true; }
+  // come and go. Distance() is not valid inside a batch. EndBatch() recomputes only the tiles
+  // near obstacles that changed, so a batch on a grid continued from a finished one (a map
+  // rebuild that keeps its first keyframes) costs what the new scans touch.
+  void BeginBatch();
   void EndBatch();
 
   // Adds log-odds to one cell (used by IntegrateScan; public for tests).
@@ -131,6 +133,8 @@ class TiledGrid {
   std::vector<std::shared_ptr<Tile>> tiles_;
   std::shared_ptr<Tile> empty_;  // prototype of a fresh tile
   bool batch_ = false;           // inside BeginBatch() / EndBatch()
+  // Tiles (tx, ty) where a cell became or stopped being an obstacle in this batch (repeats).
+  std::vector<std::pair<int, int>> batch_dirty_;
 };
 
 // Inline: the scan matcher calls it for every point of every iteration.
