@@ -106,6 +106,49 @@ TEST(TiledGrid, BatchBuildEqualsScanByScanIntegration) {
   EXPECT_GT(freed, 0) << "the scans should also clear some earlier hits";
 }
 
+TEST(TiledGrid, ContinuedBatchEqualsScanByScanIntegration) {
+  // A batch on a finished grid (a continued map rebuild) recomputes only the tiles near the
+  // obstacles it changed. The scans stay inside one tile (cells 0..63, 3.2 m) with walls up to
+  // 2 cells from its border, so the field of the neighbouring tiles, which no scan touches,
+  // changes with them; every fourth scan is in a far part of the map.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  TiledGrid one(Opts()), batch(Opts());
+  auto scan = [&](int s, std::vector<Eigen::Vector2d>* ends, std::vector<uint8_t>* hit) {
+    const Eigen::Vector2d origin =
+        s % 4 == 3 ? Eigen::Vector2d(9.7, -7.0) : Eigen::Vector2d(1.6, 1.6);
+    for (int k = 0; k < 180; ++k) {
+      const double a = 2.0 * M_PI * k / 180.0;
+      const double r = 1.3 + 0.15 * u(rng);  // a ragged wall, different in every scan
+      ends->push_back(origin + r * Eigen::Vector2d(std::cos(a), std::sin(a)));
+      hit->push_back(k % 13 == 0 ? 0 : 1);
+    }
+    return origin;
+  };
+  for (int part = 0; part < 3; ++part) {
+    batch.BeginBatch();
+    for (int s = 6 * part; s < 6 * part + 6; ++s) {
+      std::vector<Eigen::Vector2d> ends;
+      std::vector<uint8_t> hit;
+      const Eigen::Vector2d origin = scan(s, &ends, &hit);
+      one.IntegrateScan(origin, ends, hit);
+      batch.IntegrateScan(origin, ends, hit);
+    }
+    batch.EndBatch();
+    int x0, y0, x1, y1;
+    ASSERT_TRUE(one.Bounds(&x0, &y0, &x1, &y1));
+    for (int y = y0 - 2; y < y1 + 2; ++y) {
+      for (int x = x0 - 2; x < x1 + 2; ++x) {
+        ASSERT_EQ(one.LogOdds(x, y), batch.LogOdds(x, y)) << part << ": " << x << "," << y;
+        ASSERT_EQ(one.CellDistance(x, y), batch.CellDistance(x, y))
+            << part << ": " << x << "," << y;
+      }
+    }
+  }
+  // The walls reach the neighbouring tile's field (cell 64 is in the next tile).
+  EXPECT_LT(one.CellDistance(64, 32), 0.4);
+}
+
 // Cells a ray clears, by the definition: the Bresenham line from origin to end cell, without
 // the cells within `margin` (Chebyshev) of the end cell of a hit.
 std::vector<std::pair<int, int>> ClearedCells(int ox, int oy, int ex, int ey, bool hit,
@@ -151,8 +194,8 @@ TEST(TiledGrid, RaysClearExactlyTheirBresenhamCellsUpToTheMargin) {
           for (int y = -2 - 11; y <= -2 + 11; ++y) {
             for (int x = 3 - 11; x <= 3 + 11; ++x) {
               const bool cleared = g.LogOdds(x, y) < 0.0f;
-              const bool want = std::binary_search(expected.begin(), expected.end(),
-                                                   std::make_pair(x, y));
+              const bool want =
+                  std::binary_search(expected.begin(), expected.end(), std::make_pair(x, y));
               ASSERT_EQ(cleared, want) << "end " << ex << "," << ey << " cell " << x << "," << y
                                        << " margin " << margin << " hit " << hit;
             }

@@ -34,8 +34,8 @@ namespace fl::rbpf {
 constexpr int kTileBits = 6;
 constexpr int kTileSize = 1 << kTileBits;  // cells per tile side
 constexpr int kTileCells = kTileSize * kTileSize;
-constexpr int kDistScale = 16;             // distance units per cell
-constexpr float kLogOddsScale = 100.0f;    // stored log-odds = round(log-odds * scale)
+constexpr int kDistScale = 16;           // distance units per cell
+constexpr float kLogOddsScale = 100.0f;  // stored log-odds = round(log-odds * scale)
 
 struct Tile {
   std::array<int16_t, kTileCells> log_odds;
@@ -117,15 +117,15 @@ class TiledGrid {
   GridOptions opt_;
   double res_;
   double inv_res_;
-  int radius_;       // field radius in cells
-  int dist_max_;     // stored value meaning "radius or farther"
+  int radius_;    // field radius in cells
+  int dist_max_;  // stored value meaning "radius or farther"
   int16_t hit_, miss_, clamp_, occ_threshold_, free_threshold_;
   std::vector<uint8_t> dist_table_;  // scaled distance of offset (dx, dy), |dx|, |dy| <= radius
   // Precomputed offsets within the field radius and their scaled distances.
   struct Offset {
     int dx, dy, d;
   };
-  std::vector<Offset> disk_;  // sorted by distance
+  std::vector<Offset> disk_;        // sorted by distance
   std::vector<Offset> disk_rows_;   // the same offsets in row-major order
   std::vector<size_t> disk_start_;  // [d]: index of the first offset of disk_ at distance >= d
 
