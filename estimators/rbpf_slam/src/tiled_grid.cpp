@@ -46,6 +46,12 @@ TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
   std::sort(disk_rows_.begin(), disk_rows_.end(), [](const Offset& a, const Offset& b) {
     return a.dy != b.dy ? a.dy < b.dy : a.dx < b.dx;
   });
+  for (const Offset& o : disk_rows_) {
+    disk_rows_tile_.push_back(o.dy * kTileSize + o.dx);
+    disk_rows_d_.push_back(static_cast<uint8_t>(o.d));
+  }
+  window_side_ = 4 * radius_ + 1;
+  for (const Offset& o : disk_) disk_window_.push_back(o.dy * window_side_ + o.dx);
   disk_start_.assign(static_cast<size_t>(dist_max_) + 1, disk_.size());
   for (int d = 0; d <= dist_max_; ++d) {
     disk_start_[d] = std::lower_bound(disk_.begin(), disk_.end(), d,
@@ -147,6 +153,13 @@ void TiledGrid::BeginBatch() {
   batch_dirty_.clear();
 }
 
+void TiledGrid::MarkBatchDirty(int cx, int cy) {
+  Tile* t = MutableTile(cx >> kTileBits, cy >> kTileBits);  // written just before: no copy
+  if (t->batch_dirty) return;
+  t->batch_dirty = true;
+  batch_dirty_.emplace_back(cx >> kTileBits, cy >> kTileBits);
+}
+
 void TiledGrid::EndBatch() {
   if (!batch_) return;
   batch_ = false;
@@ -154,10 +167,9 @@ void TiledGrid::EndBatch() {
   // (< one tile): the cells to recompute lie in the tiles whose obstacles changed and their 8
   // neighbours (`redo`), and the obstacles that can be nearest to them in `redo` and its
   // neighbours (`source`). Outside `redo`, every stored distance is still right.
-  std::sort(batch_dirty_.begin(), batch_dirty_.end());
-  batch_dirty_.erase(std::unique(batch_dirty_.begin(), batch_dirty_.end()), batch_dirty_.end());
   std::vector<std::pair<int, int>> redo, source;
   for (const auto& [tx, ty] : batch_dirty_) {
+    MutableTile(tx, ty)->batch_dirty = false;
     for (int dy = -1; dy <= 1; ++dy) {
       for (int dx = -1; dx <= 1; ++dx) redo.emplace_back(tx + dx, ty + dy);
     }
@@ -197,8 +209,25 @@ void TiledGrid::EndBatch() {
 void TiledGrid::OnBecameOccupied(int cx, int cy) {
   if (batch_) {  // only the obstacle flag; EndBatch() computes the field
     SetRawDist(cx, cy, 0);
-    batch_dirty_.emplace_back(cx >> kTileBits, cy >> kTileBits);
+    MarkBatchDirty(cx, cy);
     return;
+  }
+  // The whole disk inside the cell's tile, and the tile this grid's own (UpdateCell just wrote
+  // it): the common case, with the offsets precomputed as tile indices.
+  const int lx = cx & (kTileSize - 1), ly = cy & (kTileSize - 1);
+  if (lx >= radius_ && lx < kTileSize - radius_ && ly >= radius_ && ly < kTileSize - radius_) {
+    const int ix = (cx >> kTileBits) - tx0_, iy = (cy >> kTileBits) - ty0_;
+    if (ix >= 0 && iy >= 0 && ix < ntx_ && iy < nty_) {
+      const std::shared_ptr<Tile>& slot = tiles_[static_cast<size_t>(iy) * ntx_ + ix];
+      if (slot && slot.use_count() == 1) {
+        uint8_t* dist = &slot->dist[LocalIndex(cx, cy)];
+        for (size_t i = 0; i < disk_rows_.size(); ++i) {
+          uint8_t& v = dist[disk_rows_tile_[i]];
+          v = std::min(v, disk_rows_d_[i]);
+        }
+        return;
+      }
+    }
   }
   // Row-major offsets: consecutive cells share a tile, which is looked up (and made writable)
   // only when one of its cells actually gets nearer.
@@ -227,36 +256,52 @@ void TiledGrid::OnBecameOccupied(int cx, int cy) {
 void TiledGrid::OnBecameFree(int cx, int cy) {
   if (batch_) {  // any value but 0; EndBatch() computes the field
     SetRawDist(cx, cy, dist_max_);
-    batch_dirty_.emplace_back(cx >> kTileBits, cy >> kTileBits);
+    MarkBatchDirty(cx, cy);
     return;
   }
   // Only cells whose nearest obstacle was this one (stored distance == distance to it) change;
   // each of them searches the disk outwards (offsets sorted by distance) for its new nearest.
+  // Every cell read lies within two field radii of (cx, cy): they are copied once into a window
+  // (row-major, side window_side_). The window's values stay right while cells are repaired:
+  // a repair writes a nonzero value over a nonzero one (the searches only look for zeros) and
+  // each cell is visited once.
   SetRawDist(cx, cy, 1);  // no longer an obstacle (1 ≠ 0); recomputed below
-  int ctx = INT32_MIN, cty = INT32_MIN;
-  const Tile* read = nullptr;
-  for (const Offset& o : disk_rows_) {  // row-major: the tile lookup is cached
-    const int x = cx + o.dx, y = cy + o.dy;
-    if ((x >> kTileBits) != ctx || (y >> kTileBits) != cty) {
-      ctx = x >> kTileBits;
-      cty = y >> kTileBits;
-      read = TileAt(ctx, cty);
+  const int reach = 2 * radius_;
+  thread_local std::vector<uint8_t> window;
+  window.resize(static_cast<size_t>(window_side_) * window_side_);
+  for (int wy = 0; wy < window_side_; ++wy) {
+    const int y = cy - reach + wy;
+    uint8_t* out = &window[static_cast<size_t>(wy) * window_side_];
+    int wx = 0;
+    while (wx < window_side_) {  // one tile's part of the row at a time
+      const int x = cx - reach + wx;
+      const int run = std::min(window_side_ - wx, kTileSize - (x & (kTileSize - 1)));
+      const Tile* t = TileAt(x >> kTileBits, y >> kTileBits);
+      if (t) {
+        std::copy_n(&t->dist[LocalIndex(x, y)], run, out + wx);
+      } else {
+        std::fill_n(out + wx, run, static_cast<uint8_t>(dist_max_));
+      }
+      wx += run;
     }
-    const int cur = read ? read->dist[LocalIndex(x, y)] : dist_max_;
+  }
+  const uint8_t* centre = &window[static_cast<size_t>(reach) * window_side_ + reach];
+  for (const Offset& o : disk_rows_) {
+    const int off = o.dy * window_side_ + o.dx;
+    const int cur = centre[off];
     if (cur == 0) continue;                // another obstacle
     if (o.d != 0 && cur != o.d) continue;  // its nearest obstacle is another one
     // Its new nearest obstacle is at least as far as the old one (`cur`): offsets nearer than
     // that hold no obstacle and are skipped.
     int best = dist_max_;
     for (size_t i = disk_start_[cur]; i < disk_.size(); ++i) {
-      const Offset& q = disk_[i];
-      if (q.d >= best) break;
-      if (RawDist(x + q.dx, y + q.dy) == 0) {
-        best = q.d;
+      if (disk_[i].d >= best) break;
+      if (centre[off + disk_window_[i]] == 0) {
+        best = disk_[i].d;
         break;
       }
     }
-    if (best != cur) SetRawDist(x, y, best);
+    if (best != cur) SetRawDist(cx + o.dx, cy + o.dy, best);
   }
 }
 

@@ -40,7 +40,8 @@ constexpr float kLogOddsScale = 100.0f;  // stored log-odds = round(log-odds * s
 struct Tile {
   std::array<int16_t, kTileCells> log_odds;
   std::array<uint8_t, kTileCells> dist;
-  int occupied = 0;  // number of obstacle cells in this tile
+  int occupied = 0;          // number of obstacle cells in this tile
+  bool batch_dirty = false;  // an obstacle changed here in the open batch (TiledGrid::EndBatch)
 };
 
 inline int FloorDiv(int a, int b) { return (a >= 0) ? a / b : -((-a + b - 1) / b); }
@@ -111,6 +112,7 @@ class TiledGrid {
     return t ? t->dist[((cy & (kTileSize - 1)) << kTileBits) | (cx & (kTileSize - 1))] : dist_max_;
   }
   void SetRawDist(int cx, int cy, int value);
+  void MarkBatchDirty(int cx, int cy);
   void OnBecameOccupied(int cx, int cy);
   void OnBecameFree(int cx, int cy);
 
@@ -125,15 +127,20 @@ class TiledGrid {
   struct Offset {
     int dx, dy, d;
   };
-  std::vector<Offset> disk_;        // sorted by distance
-  std::vector<Offset> disk_rows_;   // the same offsets in row-major order
-  std::vector<size_t> disk_start_;  // [d]: index of the first offset of disk_ at distance >= d
+  std::vector<Offset> disk_;          // sorted by distance
+  std::vector<Offset> disk_rows_;     // the same offsets in row-major order
+  std::vector<int> disk_rows_tile_;   // ... as index offsets within one tile
+  std::vector<uint8_t> disk_rows_d_;  // ... their distances
+  std::vector<size_t> disk_start_;    // [d]: index of the first offset of disk_ at distance >= d
+  int window_side_ = 0;               // OnBecameFree's window: cells within 2 radii, row-major
+  std::vector<int> disk_window_;      // disk_[i] as an offset in that window
 
   int tx0_ = 0, ty0_ = 0, ntx_ = 0, nty_ = 0;
   std::vector<std::shared_ptr<Tile>> tiles_;
   std::shared_ptr<Tile> empty_;  // prototype of a fresh tile
   bool batch_ = false;           // inside BeginBatch() / EndBatch()
-  // Tiles (tx, ty) where a cell became or stopped being an obstacle in this batch (repeats).
+  // Tiles (tx, ty) where a cell became or stopped being an obstacle in this batch (each once:
+  // Tile::batch_dirty).
   std::vector<std::pair<int, int>> batch_dirty_;
 };
 
