@@ -46,10 +46,6 @@ TiledGrid::TiledGrid(const GridOptions& options) : opt_(options) {
   std::sort(disk_rows_.begin(), disk_rows_.end(), [](const Offset& a, const Offset& b) {
     return a.dy != b.dy ? a.dy < b.dy : a.dx < b.dx;
   });
-  for (const Offset& o : disk_rows_) {
-    disk_rows_tile_.push_back(o.dy * kTileSize + o.dx);
-    disk_rows_d_.push_back(static_cast<uint8_t>(o.d));
-  }
   window_side_ = 4 * radius_ + 1;
   for (const Offset& o : disk_) disk_window_.push_back(o.dy * window_side_ + o.dx);
   disk_start_.assign(static_cast<size_t>(dist_max_) + 1, disk_.size());
@@ -212,44 +208,40 @@ void TiledGrid::OnBecameOccupied(int cx, int cy) {
     MarkBatchDirty(cx, cy);
     return;
   }
-  // The whole disk inside the cell's tile, and the tile this grid's own (UpdateCell just wrote
-  // it): the common case, with the offsets precomputed as tile indices.
-  const int lx = cx & (kTileSize - 1), ly = cy & (kTileSize - 1);
-  if (lx >= radius_ && lx < kTileSize - radius_ && ly >= radius_ && ly < kTileSize - radius_) {
-    const int ix = (cx >> kTileBits) - tx0_, iy = (cy >> kTileBits) - ty0_;
-    if (ix >= 0 && iy >= 0 && ix < ntx_ && iy < nty_) {
-      const std::shared_ptr<Tile>& slot = tiles_[static_cast<size_t>(iy) * ntx_ + ix];
-      if (slot && slot.use_count() == 1) {
-        uint8_t* dist = &slot->dist[LocalIndex(cx, cy)];
-        for (size_t i = 0; i < disk_rows_.size(); ++i) {
-          uint8_t& v = dist[disk_rows_tile_[i]];
-          v = std::min(v, disk_rows_d_[i]);
+  // dist = min(dist, distance to this cell) over the square of side 2r+1 around it, tile part
+  // by tile part, row by row (dist_table_ is that distance, saturated at dist_max_: outside the
+  // disk the min changes nothing). A tile part is made writable (created, or copied if shared)
+  // only when one of its cells actually gets nearer.
+  const int side = 2 * radius_ + 1;
+  const int x0 = cx - radius_, y0 = cy - radius_;
+  for (int ty = y0 >> kTileBits; ty <= (y0 + side - 1) >> kTileBits; ++ty) {
+    const int ya = std::max(y0, ty * kTileSize), yb = std::min(y0 + side, (ty + 1) * kTileSize);
+    for (int tx = x0 >> kTileBits; tx <= (x0 + side - 1) >> kTileBits; ++tx) {
+      const int xa = std::max(x0, tx * kTileSize), xb = std::min(x0 + side, (tx + 1) * kTileSize);
+      const int n = xb - xa;
+      Tile* write = nullptr;
+      const int ix = tx - tx0_, iy = ty - ty0_;
+      if (ix >= 0 && iy >= 0 && ix < ntx_ && iy < nty_) {
+        const std::shared_ptr<Tile>& slot = tiles_[static_cast<size_t>(iy) * ntx_ + ix];
+        if (slot && slot.use_count() == 1) write = slot.get();
+      }
+      if (!write) {
+        const Tile* read = TileAt(tx, ty);
+        bool nearer = false;
+        for (int y = ya; y < yb && !nearer; ++y) {
+          const uint8_t* d = &dist_table_[static_cast<size_t>(y - y0) * side + (xa - x0)];
+          const uint8_t* row = read ? &read->dist[LocalIndex(xa, y)] : nullptr;
+          for (int i = 0; i < n; ++i) nearer |= (row ? row[i] : dist_max_) > d[i];
         }
-        return;
+        if (!nearer) continue;
+        write = MutableTile(tx, ty);
+      }
+      for (int y = ya; y < yb; ++y) {
+        const uint8_t* d = &dist_table_[static_cast<size_t>(y - y0) * side + (xa - x0)];
+        uint8_t* row = &write->dist[LocalIndex(xa, y)];
+        for (int i = 0; i < n; ++i) row[i] = std::min(row[i], d[i]);
       }
     }
-  }
-  // Row-major offsets: consecutive cells share a tile, which is looked up (and made writable)
-  // only when one of its cells actually gets nearer.
-  int ctx = INT32_MIN, cty = INT32_MIN;
-  const Tile* read = nullptr;
-  Tile* write = nullptr;
-  for (const Offset& o : disk_rows_) {
-    const int x = cx + o.dx, y = cy + o.dy;
-    const int tx = x >> kTileBits, ty = y >> kTileBits;
-    if (tx != ctx || ty != cty) {
-      ctx = tx;
-      cty = ty;
-      read = TileAt(tx, ty);
-      write = nullptr;
-    }
-    const int idx = LocalIndex(x, y);
-    if ((read ? read->dist[idx] : dist_max_) <= o.d) continue;
-    if (!write) {
-      write = MutableTile(tx, ty);
-      read = write;
-    }
-    write->dist[idx] = static_cast<uint8_t>(o.d);
   }
 }
 

@@ -127,13 +127,11 @@ class TiledGrid {
   struct Offset {
     int dx, dy, d;
   };
-  std::vector<Offset> disk_;          // sorted by distance
-  std::vector<Offset> disk_rows_;     // the same offsets in row-major order
-  std::vector<int> disk_rows_tile_;   // ... as index offsets within one tile
-  std::vector<uint8_t> disk_rows_d_;  // ... their distances
-  std::vector<size_t> disk_start_;    // [d]: index of the first offset of disk_ at distance >= d
-  int window_side_ = 0;               // OnBecameFree's window: cells within 2 radii, row-major
-  std::vector<int> disk_window_;      // disk_[i] as an offset in that window
+  std::vector<Offset> disk_;        // sorted by distance
+  std::vector<Offset> disk_rows_;   // the same offsets in row-major order
+  std::vector<size_t> disk_start_;  // [d]: index of the first offset of disk_ at distance >= d
+  int window_side_ = 0;             // OnBecameFree's window: cells within 2 radii, row-major
+  std::vector<int> disk_window_;    // disk_[i] as an offset in that window
 
   int tx0_ = 0, ty0_ = 0, ntx_ = 0, nty_ = 0;
   std::vector<std::shared_ptr<Tile>> tiles_;
