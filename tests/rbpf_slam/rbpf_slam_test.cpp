@@ -145,6 +145,48 @@ TEST(RbpfSlam, SimulatedLoopIsClosed) {
   EXPECT_LT(max_err, 0.25);
 }
 
+TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {
+  // Two laps: on the second, nearly every keyframe could close a loop. With spacing 4 the
+  // closures' keyframes are at least 4 apart; with the default (1) some are closer.
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  lo.laps = 2;
+  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  auto closure_keyframes = [&](int spacing, RbpfSlamStats* stats) {
+    RbpfSlamOptions o = TestOptions(10);
+    o.graph.loop_closure_spacing = spacing;
+    RbpfSlam slam(o);
+    std::vector<int> kf;
+    for (size_t k = 0; k < run.utimes.size(); ++k) {
+      ScanResult r;
+      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+      for (const KeyframeFactor& f : r.factors) {
+        if (f.is_loop_closure && (kf.empty() || kf.back() != f.keyframe_j)) {
+          kf.push_back(f.keyframe_j);
+        }
+      }
+    }
+    *stats = slam.stats();
+    return kf;
+  };
+  RbpfSlamStats every, spaced;
+  const std::vector<int> kf_every = closure_keyframes(1, &every);
+  const std::vector<int> kf_spaced = closure_keyframes(4, &spaced);
+  int min_gap_every = 1 << 30, min_gap_spaced = 1 << 30;
+  for (size_t i = 1; i < kf_every.size(); ++i) {
+    min_gap_every = std::min(min_gap_every, kf_every[i] - kf_every[i - 1]);
+  }
+  for (size_t i = 1; i < kf_spaced.size(); ++i) {
+    min_gap_spaced = std::min(min_gap_spaced, kf_spaced[i] - kf_spaced[i - 1]);
+  }
+  ASSERT_GE(kf_every.size(), 6u);
+  ASSERT_GE(kf_spaced.size(), 3u) << "spaced search should still close the loop";
+  EXPECT_LT(min_gap_every, 4);
+  EXPECT_GE(min_gap_spaced, 4);
+  EXPECT_LT(spaced.loop_candidates, every.loop_candidates);
+}
+
 TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
   // The first 10 m of the loop (no loop closure yet, so no optimisation moves a keyframe): next
   // to each successful sequential ICP edge there is a filter edge with the filter's relative
@@ -428,6 +470,9 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
   o = RbpfSlamOptions();
   o.graph.loop_max_candidates = 0;
   EXPECT_NE(o.Validate().message().find("graph.loop_max_candidates"), std::string::npos);
+  o = RbpfSlamOptions();
+  o.graph.loop_closure_spacing = 0;
+  EXPECT_NE(o.Validate().message().find("graph.loop_closure_spacing"), std::string::npos);
   o = RbpfSlamOptions();
   o.graph.loop_search.sigma = 0.0;
   EXPECT_NE(o.Validate().message().find("graph.loop_search.sigma"), std::string::npos);

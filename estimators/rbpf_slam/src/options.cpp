@@ -149,6 +149,10 @@ Status GraphOptions::Validate() const {
   FL_RETURN_IF_ERROR(recovery_search.Validate("graph.recovery_search"));
   FL_RETURN_IF_ERROR(NonNegative("graph.recovery_min_gain", recovery_min_gain));
   if (loop_max_candidates < 1) return Status::Error("graph.loop_max_candidates must be >= 1");
+  if (loop_closure_spacing < 1) {
+    return Status::Error(
+        "graph.loop_closure_spacing must be >= 1 (keyframes; 1 = search at every one)");
+  }
   if (!(divergence_min_gain >= 0.0 && divergence_min_gain <= 1.0)) {
     return Status::Error("graph.divergence_min_gain = " + Num(divergence_min_gain) +
                          " must be in [0, 1] (an inlier-fraction difference)");

@@ -479,6 +479,7 @@ Eigen::Matrix3d RbpfSlam::GraphEdgeInformation(const IcpResult& icp) const {
 
 void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   const GraphOptions& g = opt_.graph;
+  if (last_closure_keyframe_ >= 0 && j - last_closure_keyframe_ < g.loop_closure_spacing) return;
   const fl::Pose2 pj = graph_.pose(j);
   // Candidates: keyframes at least loop_min_travel back along the path and within
   // loop_search_radius in the graph, nearest first; at most loop_max_candidates, each outside the
@@ -532,6 +533,7 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
     const PoseGraphEdge& e = graph_.edges()[edge_index];
     if (!e.enabled) continue;  // rejected by the residual check
     ++stats_.loop_closures;
+    last_closure_keyframe_ = j;
     res->factors.push_back(Factor(e.i, e.j, icp, true));
   }
 }

@@ -189,6 +189,7 @@ class RbpfSlam {
   std::vector<fl::Pose2> rebuild_poses_;
   PoseGraph2D graph_;
   int graph_loop_edges_ = 0;
+  int last_closure_keyframe_ = -1;  // newest keyframe with an accepted loop closure (-1: none)
   int optimized_loop_edges_ = 0;
   std::vector<PathRecord> path_;
   RbpfSlamStats stats_;
