@@ -143,7 +143,8 @@ class TiledGrid {
 };
 
 // Inline: the scan matcher calls it for every point of every iteration.
-inline double TiledGrid::Distance(const Eigen::Vector2d& p, Eigen::Vector2d* gradient) const {
+__attribute__((always_inline)) inline double TiledGrid::Distance(const Eigen::Vector2d& p,
+                                                                  Eigen::Vector2d* gradient) const {
   const double u = p.x() * inv_res_ - 0.5, v = p.y() * inv_res_ - 0.5;
   const double fu = std::floor(u), fv = std::floor(v);
   const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
