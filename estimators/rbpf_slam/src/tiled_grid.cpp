@@ -317,7 +317,9 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     const int dx = std::abs(ex - ox), dy = -std::abs(ey - oy);
     const int sx = ox < ex ? 1 : -1, sy = oy < ey ? 1 : -1;
     int err = dx + dy;
-    int ctx = INT32_MIN, cty = INT32_MIN;
+    // The tile and the in-tile coordinates follow the steps; the tile is looked up again only
+    // after a step leaves it.
+    int lx = x & (kTileSize - 1), ly = y & (kTileSize - 1);
     Tile* tile = nullptr;
     // Hits stop clearing `free_space_margin` cells before the end cell, so rays grazing a wall
     // do not erode it (and the likelihood field does not flicker). Every step of this
@@ -328,13 +330,8 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     const int steps = std::max(dx, -dy);
     const int cells = is_hit[k] ? steps - margin : steps + 1;
     for (int n = 0; n < cells; ++n) {
-      const int tx = x >> kTileBits, ty = y >> kTileBits;
-      if (tx != ctx || ty != cty) {
-        tile = MutableTile(tx, ty);
-        ctx = tx;
-        cty = ty;
-      }
-      const int idx = LocalIndex(x, y);
+      if (!tile) tile = MutableTile(x >> kTileBits, y >> kTileBits);
+      const int idx = (ly << kTileBits) | lx;
       int16_t& l = tile->log_odds[idx];
       int v = std::max<int>(neg_clamp, l + miss);
       if (v == 0) v = -1;
@@ -347,10 +344,20 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
       if (e2 >= dy) {
         err += dy;
         x += sx;
+        lx += sx;
+        if (static_cast<unsigned>(lx) >= static_cast<unsigned>(kTileSize)) {
+          lx &= kTileSize - 1;
+          tile = nullptr;
+        }
       }
       if (e2 <= dx) {
         err += dx;
         y += sy;
+        ly += sy;
+        if (static_cast<unsigned>(ly) >= static_cast<unsigned>(kTileSize)) {
+          ly &= kTileSize - 1;
+          tile = nullptr;
+        }
       }
     }
   }
