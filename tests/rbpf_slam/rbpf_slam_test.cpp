@@ -54,6 +54,14 @@ RbpfSlamOptions TestOptions(int particles) {
   return o;
 }
 
+// The loop corridor of RoomWithBoxes, a scan every 0.25 m, with the default odometry noise.
+test::LoopRun RoomLoopRun(int laps) {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  lo.laps = laps;
+  return test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+}
+
 // Runs a whole simulated drive through a filter with options `o`; returns the largest error of
 // its final trajectory against the truth and (optionally) its stats.
 double MaxTrajectoryError(const RbpfSlamOptions& o, const test::LoopRun& run,
@@ -74,10 +82,7 @@ double MaxTrajectoryError(const RbpfSlamOptions& o, const test::LoopRun& run,
 }
 
 TEST(RbpfSlam, ResamplesOnlyWhenNeffDropsBelowTheThreshold) {
-  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
-  test::LoopRunOptions lo;
-  lo.step_m = 0.25;
-  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  const test::LoopRun run = RoomLoopRun(1);
   for (double threshold : {0.0, 0.5, 1.0}) {
     RbpfSlamOptions o = TestOptions(10);
     o.neff_threshold = threshold;
@@ -109,11 +114,7 @@ TEST(RbpfSlam, ResamplesOnlyWhenNeffDropsBelowTheThreshold) {
 }
 
 TEST(RbpfSlam, SimulatedLoopIsClosed) {
-  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
-  test::LoopRunOptions lo;
-  lo.step_m = 0.25;
-  lo.laps = 1;
-  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  const test::LoopRun run = RoomLoopRun(1);
   RbpfSlamOptions o = TestOptions(10);
   RbpfSlam slam(o);
   int factors = 0, loops = 0;
@@ -148,11 +149,7 @@ TEST(RbpfSlam, SimulatedLoopIsClosed) {
 TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {
   // Two laps: on the second, nearly every keyframe could close a loop. With spacing 4 the
   // closures' keyframes are at least 4 apart; with the default (1) some are closer.
-  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
-  test::LoopRunOptions lo;
-  lo.step_m = 0.25;
-  lo.laps = 2;
-  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  const test::LoopRun run = RoomLoopRun(2);
   auto closure_keyframes = [&](int spacing, RbpfSlamStats* stats) {
     RbpfSlamOptions o = TestOptions(10);
     o.graph.loop_closure_spacing = spacing;
@@ -193,10 +190,7 @@ TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
   // pose at the time and the documented std for the odometry's motion (d, dθ) between the two
   // keyframes: k (srr d + srt |dθ|) in x and y, k (stt |dθ| + str d) in heading, at least the
   // minimum.
-  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
-  test::LoopRunOptions lo;
-  lo.step_m = 0.25;
-  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  const test::LoopRun run = RoomLoopRun(1);
   for (bool filter_edges : {true, false}) {
     RbpfSlamOptions o = TestOptions(5);
     o.graph.filter_edges = filter_edges;
@@ -334,10 +328,7 @@ TEST(RbpfSlam, ScansTakenInFastTurnsWaitForTheNextScan) {
   // max_turn_rate 1 rad/s the filter uses none of those scans: the turn's odometry accumulates
   // and the first scan after it is matched with the whole turn as its motion. The loop must
   // still close.
-  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
-  test::LoopRunOptions lo;
-  lo.step_m = 0.25;
-  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  const test::LoopRun run = RoomLoopRun(1);
   RbpfSlamOptions o = TestOptions(10);
   ASSERT_EQ(o.max_turn_rate, 1.0);  // the default
   RbpfSlam slam(o);
