@@ -373,6 +373,30 @@ TEST(RbpfSlam, TurnGateHoldsBackOnlyScansOfADenseStream) {
   }
 }
 
+TEST(RbpfSlam, NoLoopSearchWhereIcpFailedOnlyOnOverlap) {
+  // Two laps of the room: some candidates overlap the new keyframe too little, and ICP from the
+  // graph's pose converges near it but fails on the inlier fraction. By default no correlative
+  // search follows those; with loop_search_after_partial_overlap they are searched, and every
+  // one of those searches fails too (same closures, same searches otherwise).
+  const test::LoopRun run = RoomLoopRun(2);
+  auto stats = [&](bool search_after_partial_overlap) {
+    RbpfSlamOptions o = TestOptions(10);
+    o.graph.loop_search_after_partial_overlap = search_after_partial_overlap;
+    RbpfSlam slam(o);
+    for (size_t k = 0; k < run.utimes.size(); ++k) {
+      ScanResult r;
+      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    }
+    return slam.stats();
+  };
+  const RbpfSlamStats skip = stats(false), search = stats(true);
+  EXPECT_GE(skip.loop_searches_skipped, 2);
+  EXPECT_EQ(search.loop_searches_skipped, 0);
+  EXPECT_EQ(search.loop_searches, skip.loop_searches + skip.loop_searches_skipped);
+  EXPECT_EQ(search.loop_closures, skip.loop_closures);
+  EXPECT_GE(skip.loop_closures, 6);
+}
+
 TEST(RbpfSlamBadInput, InvalidBeamsAreIgnored) {
   RbpfSlam slam(TestOptions(2));
   std::vector<float> r(181, 3.0f);
@@ -502,3 +526,4 @@ TEST(RbpfSlamOptions, ConfigFileLoadsAndMatchesDefaults) {
 
 }  // namespace
 }  // namespace fl::rbpf
+

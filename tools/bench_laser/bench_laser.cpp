@@ -400,6 +400,8 @@ int main(int argc, char** argv) {
             .Add("matched_pairs", static_cast<double>(ate.trans_m.count))
             .Add("loop_candidates", static_cast<double>(st.loop_candidates))
             .Add("loop_closures", static_cast<double>(st.loop_closures))
+            .Add("loop_searches", static_cast<double>(st.loop_searches))
+            .Add("searches_skipped", static_cast<double>(st.loop_searches_skipped))
             .Add("loop_rejections", static_cast<double>(st.loop_rejections))
             .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
             .Add("rebuilds_continued", static_cast<double>(st.map_rebuilds_continued))

@@ -538,7 +538,7 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   }
 }
 
-bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) const {
+bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) {
   const GraphOptions& g = opt_.graph;
   // Reference: the candidate and its neighbours, in the candidate's base frame.
   std::vector<PointNormal> ref;
@@ -567,6 +567,16 @@ bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) const {
   // correlative search around it, then ICP from there.
   *icp = AlignPointToLine(ref, keyframes_[j].points_base, prior, io);
   if (icp->ok || !g.loop_search.enabled) return icp->ok;
+  // Converged near the graph's pose, failed only on the inlier fraction: the start was inside
+  // ICP's basin and a search for a better one cannot add overlap.
+  const fl::Pose2 moved = prior.between(icp->T_ref_query);
+  if (!g.loop_search_after_partial_overlap && icp->converged && icp->rms <= io.max_rms &&
+      icp->inlier_fraction < io.min_inlier_fraction && std::hypot(moved.x, moved.y) < 0.1 &&
+      std::abs(moved.theta) < 0.05) {
+    ++stats_.loop_searches_skipped;
+    return false;
+  }
+  ++stats_.loop_searches;
   std::vector<Eigen::Vector2d> ref_points(ref.size());
   for (size_t i = 0; i < ref.size(); ++i) ref_points[i] = ref[i].p;
   const CorrelativeResult cr =

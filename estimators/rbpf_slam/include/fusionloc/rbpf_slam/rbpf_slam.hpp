@@ -60,6 +60,9 @@ struct RbpfSlamStats {
   int64_t keyframes = 0;
   int64_t icp_failures = 0;             // sequential keyframe ICP that failed verification
   int64_t loop_candidates = 0;
+  int64_t loop_searches = 0;            // correlative searches after a failed loop ICP
+  int64_t loop_searches_skipped = 0;    // ... not run: ICP failed on partial overlap only
+                                        //     (graph.loop_search_after_partial_overlap)
   int64_t loop_closures = 0;            // verified, added to the graph and kept
   int64_t loop_rejections = 0;          // loop edges dropped after optimisation (gross residual)
   int64_t map_rebuilds = 0;             // corrections fed back to the filter
@@ -146,7 +149,7 @@ class RbpfSlam {
   void SearchLoopClosure(int kf, ScanResult* result);
   // Matches keyframe j against the submap around keyframe `cand` (correlative search, then
   // ICP); true and the ICP result if verified.
-  bool VerifyLoopClosure(int cand, int j, IcpResult* icp) const;
+  bool VerifyLoopClosure(int cand, int j, IcpResult* icp);
   Eigen::Matrix3d GraphEdgeInformation(const IcpResult& icp) const;
   // The filter edge from keyframe i to the new keyframe j at their current graph poses
   // (options.hpp, graph.filter_edges).
