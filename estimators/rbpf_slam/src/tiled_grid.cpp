@@ -333,10 +333,14 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
       if (!tile) tile = MutableTile(x >> kTileBits, y >> kTileBits);
       const int idx = (ly << kTileBits) | lx;
       int16_t& l = tile->log_odds[idx];
-      int v = std::max<int>(neg_clamp, l + miss);
+      const int old = l;
+      int v = std::max<int>(neg_clamp, old + miss);
       if (v == 0) v = -1;
       l = static_cast<int16_t>(v);
-      if (v < free_threshold && tile->dist[idx] == 0) {
+      // An obstacle cell (dist 0) has log-odds >= free_threshold (hysteresis, UpdateCell), so
+      // only a cell crossing free_threshold can stop being one: the common already-free cell
+      // does not read its distance.
+      if (old >= free_threshold && v < free_threshold && tile->dist[idx] == 0) {
         tile->occupied -= 1;
         OnBecameFree(x, y);
       }
