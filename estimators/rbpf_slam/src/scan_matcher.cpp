@@ -52,10 +52,13 @@ double Evaluate(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
                 const std::vector<uint8_t>& use, const fl::Pose2& T, double dmax,
                 Eigen::Matrix3d* H, Eigen::Vector3d* g, int* n) {
   const double c = std::cos(T.theta), s = std::sin(T.theta);
+  // Sums in locals: the field is read as bytes, which may alias any memory, so sums kept in
+  // *H and *g would be stored and reloaded for every point. H is symmetric: its upper triangle
+  // is summed and mirrored (J_i J_j = J_j J_i exactly, so H is the same to the last bit).
   double cost = 0.0;
-  H->setZero();
-  g->setZero();
-  *n = 0;
+  double h00 = 0.0, h01 = 0.0, h02 = 0.0, h11 = 0.0, h12 = 0.0, h22 = 0.0;
+  double g0 = 0.0, g1 = 0.0, g2 = 0.0;
+  int count = 0;
   for (size_t i = 0; i < pts.size(); ++i) {
     if (!use[i]) continue;
     const Eigen::Vector2d& p = pts[i];
@@ -64,13 +67,22 @@ double Evaluate(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
     const double d = grid.Distance(w, &grad);
     cost += d * d;
     if (d >= dmax) continue;
-    const Eigen::Vector3d J(
-        grad.x(), grad.y(),
-        grad.x() * (-s * p.x() - c * p.y()) + grad.y() * (c * p.x() - s * p.y()));
-    H->noalias() += J * J.transpose();
-    g->noalias() += J * d;
-    ++*n;
+    const double j0 = grad.x(), j1 = grad.y();
+    const double j2 = grad.x() * (-s * p.x() - c * p.y()) + grad.y() * (c * p.x() - s * p.y());
+    h00 += j0 * j0;
+    h01 += j0 * j1;
+    h02 += j0 * j2;
+    h11 += j1 * j1;
+    h12 += j1 * j2;
+    h22 += j2 * j2;
+    g0 += j0 * d;
+    g1 += j1 * d;
+    g2 += j2 * d;
+    ++count;
   }
+  *H << h00, h01, h02, h01, h11, h12, h02, h12, h22;
+  *g << g0, g1, g2;
+  *n = count;
   return cost;
 }
 }  // namespace
