@@ -526,4 +526,3 @@ TEST(RbpfSlamOptions, ConfigFileLoadsAndMatchesDefaults) {
 
 }  // namespace
 }  // namespace fl::rbpf
-

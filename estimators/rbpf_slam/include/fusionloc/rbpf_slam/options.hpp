@@ -252,16 +252,12 @@ struct GraphOptions {
   double feedback_min_correction_m = 0.05;  // [m] ... when the newest keyframe moved this much
                                             //     (or 0.02 rad)
   CorrelativeOptions loop_search;      // correlative search before the ICP verification
+  // [-] Loop ICP from the graph's relative pose that converged within 0.1 m / 0.05 rad of it,
+  // with its RMS within loop_max_rms, failed only on the inlier fraction: the start was inside
+  // ICP's basin and the overlap is what is missing. false: no correlative search then (intel,
+  // seed 1: it ran 436 times and rescued 7 candidates; 177 of them were such failures and
+  // rescued one, a fraction of 0.598; the other 176 led ICP to within 5 cm of where it was).
   bool loop_search_after_partial_overlap = false;
-                                       // [-] ICP from the graph's relative pose that converged
-                                       //     within 0.1 m / 0.05 rad of it, with its RMS within
-                                       //     loop_max_rms, failed only on the inlier fraction:
-                                       //     the start was inside ICP's basin and the overlap is
-                                       //     what is missing. false: no correlative search then
-                                       //     (intel, seed 1: it ran 436 times and rescued 7
-                                       //     candidates; 177 of them were such failures and
-                                       //     rescued one, a fraction of 0.598; the other 176
-                                       //     searches led ICP to within 5 cm of where it was)
   bool divergence_check = true;        // [-] at each keyframe also run ICP from the odometry's
                                        //     relative pose; if it fits clearly better than the
                                        //     one from the filter's, the filter has locked onto
