@@ -18,10 +18,18 @@ namespace {
 // σ = 0.1 m, 0.05 rad.
 Eigen::Matrix3d WeakInformation() { return Eigen::Vector3d(100.0, 100.0, 400.0).asDiagonal(); }
 
+// Whether a relative pose is below both `m` metres and `rad` radians (strictly) ...
+bool Within(const fl::Pose2& d, double m, double rad) {
+  return std::hypot(d.x, d.y) < m && std::abs(d.theta) < rad;
+}
+// ... or above either.
+bool Beyond(const fl::Pose2& d, double m, double rad) {
+  return std::hypot(d.x, d.y) > m || std::abs(d.theta) > rad;
+}
+
 // A sequential ICP result is trusted only within 0.5 m / 0.3 rad of where it started.
 bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
-  const fl::Pose2 jump = start.between(icp.T_ref_query);
-  return icp.ok && std::hypot(jump.x, jump.y) < 0.5 && std::abs(jump.theta) < 0.3;
+  return icp.ok && Within(start.between(icp.T_ref_query), 0.5, 0.3);
 }
 }  // namespace
 
@@ -331,7 +339,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
       // Did the filter lock onto a wrong match? ICP from the odometry's relative pose too.
       const fl::Pose2 odom_rel = keyframes_[i].odom.between(keyframes_[j].odom);
       const fl::Pose2 diff = prior.between(odom_rel);
-      if (std::hypot(diff.x, diff.y) > 0.05 || std::abs(diff.theta) > 0.03) {
+      if (Beyond(diff, 0.05, 0.03)) {
         const IcpResult alt = AlignPointToLine(keyframes_[i].normals_base,
                                                keyframes_[j].points_base, odom_rel, opt_.icp);
         const bool alt_ok = NearStart(alt, odom_rel);
@@ -341,11 +349,9 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
             !icp_ok || alt.inlier_fraction > icp.inlier_fraction + opt_.graph.divergence_min_gain;
         const IcpResult& best = use_alt ? alt : icp;
         const fl::Pose2 agree = alt.T_ref_query.between(best.T_ref_query);
-        const bool corroborated =
-            use_alt || (std::hypot(agree.x, agree.y) < 0.05 && std::abs(agree.theta) < 0.02);
+        const bool corroborated = use_alt || Within(agree, 0.05, 0.02);
         const fl::Pose2 moved = prior.between(best.T_ref_query);
-        if (alt_ok && corroborated &&
-            (std::hypot(moved.x, moved.y) > 0.1 || std::abs(moved.theta) > 0.05)) {
+        if (alt_ok && corroborated && Beyond(moved, 0.1, 0.05)) {
           // The filter diverged: move node j (and the particles) to where ICP puts it.
           ++stats_.divergences;
           if (use_alt) icp = alt;
@@ -357,9 +363,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
     }
     // ICP failed, or it put j far from the filter's pose: has the filter lost track?
     const fl::Pose2 icp_moved = prior.between(icp.T_ref_query);
-    if (!moved_node && pre_scan_map &&
-        (!icp_ok || std::hypot(icp_moved.x, icp_moved.y) > 0.1 ||
-         std::abs(icp_moved.theta) > 0.05)) {
+    if (!moved_node && pre_scan_map && (!icp_ok || Beyond(icp_moved, 0.1, 0.05))) {
       fl::Pose2 corrected;
       IcpResult from_corrected;
       if (SearchLostTrack(i, j, pose, *pre_scan_map, icp_ok ? &icp : nullptr, &corrected,
@@ -571,8 +575,7 @@ bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) {
   // ICP's basin and a search for a better one cannot add overlap.
   const fl::Pose2 moved = prior.between(icp->T_ref_query);
   if (!g.loop_search_after_partial_overlap && icp->converged && icp->rms <= io.max_rms &&
-      icp->inlier_fraction < io.min_inlier_fraction && std::hypot(moved.x, moved.y) < 0.1 &&
-      std::abs(moved.theta) < 0.05) {
+      icp->inlier_fraction < io.min_inlier_fraction && Within(moved, 0.1, 0.05)) {
     ++stats_.loop_searches_skipped;
     return false;
   }
@@ -619,8 +622,7 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   if (res) res->graph_changed = true;
   // Feed back only when the newest keyframe (where the particles are) was corrected.
   const fl::Pose2 c = before[last].between(graph_.pose(last));
-  if (!g.feed_back ||
-      (std::hypot(c.x, c.y) < g.feedback_min_correction_m && std::abs(c.theta) < 0.02)) {
+  if (!g.feed_back || Within(c, g.feedback_min_correction_m, 0.02)) {
     return true;
   }
   // Feed back: shift every particle by the correction of the latest keyframe and give all of
