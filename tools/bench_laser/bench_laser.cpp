@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -34,6 +35,7 @@
 #include "fusionloc/importers/carmen.hpp"
 #include "fusionloc/rbpf_slam/odometry_buffer.hpp"
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
+#include "fusionloc/rbpf_slam/reference_refit.hpp"
 #include "fusionloc/sim/simulator.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
@@ -153,6 +155,52 @@ double FactorChi2(const fl::rbpf::KeyframeFactor& f, const fl::eval::Trajectory&
   return e.dot(f.information * e);
 }
 
+// The reference refit (reference_refit.hpp) of a log's scans that have odometry and a reference
+// pose; odometry noise from `noise` (corrected logs: the model that generated it) or, without
+// it, the filter's motion model. Empty if fewer than 2 scans qualify.
+fl::eval::Trajectory Refit(const LogData& d, const fl::rbpf::RbpfSlamOptions& o,
+                           const fl::importers::CarmenNoiseModel* noise, fl::Utime max_dt,
+                           const fl::rbpf::RefitOptions& ro, int* icp_edges) {
+  std::vector<fl::rbpf::RefitScan> scans;
+  for (const fl::rbpf::LaserScan& scan : d.scans) {
+    fl::rbpf::RefitScan s;
+    if (!ReferenceAt(d.ground_truth, scan.utime, max_dt, &s.T_world_base_reference) ||
+        !d.odom.Lookup(scan.utime, &s.T_odom_base).ok())
+      continue;
+    if (!scans.empty() && scan.utime <= scans.back().scan.utime) continue;
+    s.scan = scan;
+    scans.push_back(std::move(s));
+  }
+  if (scans.size() < 2) return {};
+  fl::rbpf::RefitOdometrySigma sigma = fl::rbpf::RefitOdometrySigma::FromMotion(o.motion);
+  if (noise) {
+    sigma.trans_per_m = noise->a1;
+    sigma.trans_per_rad = noise->a2;
+    sigma.rot_per_rad = noise->a3;
+    sigma.rot_per_m = noise->a4;
+    sigma.min_sigma_xy = noise->min_sigma_xy;
+    sigma.min_sigma_rad = noise->min_sigma_theta;
+  }
+  const fl::rbpf::RefitResult r = fl::rbpf::RefitReference(scans, o, sigma, ro);
+  *icp_edges = r.icp_edges;
+  fl::eval::Trajectory out;
+  for (size_t k = 0; k < scans.size(); ++k)
+    out.push_back({scans[k].scan.utime, r.T_world_base[k].ToIsometry3()});
+  return out;
+}
+
+// The importer's odometry noise model with every sigma multiplied by `scale`.
+fl::importers::CarmenNoiseModel ScaledNoise(double scale) {
+  fl::importers::CarmenNoiseModel n;
+  n.a1 *= scale;
+  n.a2 *= scale;
+  n.a3 *= scale;
+  n.a4 *= scale;
+  n.min_sigma_xy *= scale;
+  n.min_sigma_theta *= scale;
+  return n;
+}
+
 // Laser scans, odometry and ground truth of a simulated world (camera off).
 LogData SimulateWorld(fl::sim::SimOptions so, fl::Pose2* T_base_laser) {
   so.camera.enabled = false;
@@ -213,10 +261,29 @@ int main(int argc, char** argv) {
               "also run these simulated worlds, comma-separated (e.g. paper,corridor; options from "
               "CONFIG_DIR/sim_<world>.yaml, laser + odometry only), named sim-<world>");
   cli.AddFlag("config-dir", &config_dir, "folder with sim_<world>.yaml (for --sim-worlds)");
+  double noise_scale = 1.0;
+  cli.AddFlag("odometry-noise", &noise_scale,
+              "scale of the synthetic odometry noise of corrected logs (all of the importer's "
+              "noise sigmas are multiplied by it; 0 = the reference's own motion as odometry, "
+              "to see what the scans alone pull away from the reference)");
+  bool refit = true;
+  cli.AddFlag("refit", &refit,
+              "also solve the data's own MAP problem (odometry + ICP edges to the previous and "
+              "nearby earlier scans) starting at the reference and report the ATE of its optimum "
+              "against the reference as refit_ate_m: how far the measurements, read through the "
+              "estimator's models, pull away from the reference (reference_refit.hpp)");
+  fl::rbpf::RefitOptions refit_options;
+  cli.AddFlag("refit-pairs", &refit_options.max_pairs,
+              "--refit: ICP edges from each scan to at most this many nearest earlier scans "
+              "within 4 m (besides the previous scan)");
   bool dump = false;
   cli.AddFlag("dump", &dump,
               "also write the estimate and reference trajectories (TUM) next to the PNGs");
   if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (const fl::Status s = refit_options.Validate(); !s.ok()) {
+    std::cerr << "fl-bench-laser: --refit-pairs: " << s.message() << "\n";
+    return 2;
+  }
 
   fl::rbpf::RbpfSlamOptions options;
   try {
@@ -226,6 +293,11 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (particles > 0) options.particles = particles;
+  if (!std::isfinite(noise_scale) || noise_scale < 0.0) {
+    std::cerr << "fl-bench-laser: --odometry-noise=" << noise_scale
+              << ": expected a finite scale >= 0 (1 = the importer's noise model, 0 = none)\n";
+    return 2;
+  }
   std::vector<uint64_t> seeds;
   for (size_t a = 0, b; a < seeds_text.size(); a = b + 1) {
     b = seeds_text.find(',', a);
@@ -314,6 +386,7 @@ int main(int argc, char** argv) {
         } else {
           fl::importers::CarmenOptions co;
           co.seed = seed;
+          co.noise = ScaledNoise(noise_scale);
           const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
           if (!in.reference.empty()) co.noisy_odometry = "false";
           // csail-corrected.log.gz printed its time stamps with 6 significant digits: take them
@@ -421,6 +494,19 @@ int main(int argc, char** argv) {
             .Add("loop_chi2_median",
                  chi2_loop.empty() ? -1.0 : fl::bench::ComputeStats(chi2_loop).median)
             .Add("peak_rss_mb", fl::bench::PeakRssMb());
+        if (refit && in.sim_config.empty()) {
+          int refit_edges = 0;
+          const fl::importers::CarmenNoiseModel noise = ScaledNoise(noise_scale);
+          const fl::eval::Trajectory fitted =
+              Refit(data, run_options, in.reference.empty() ? &noise : nullptr, max_dt,
+                    refit_options, &refit_edges);
+          if (!fitted.empty()) {
+            const fl::eval::AteResult fa =
+                fl::eval::ComputeAte(fitted, data.ground_truth, fl::eval::Alignment::kSE2, max_dt);
+            run.Add("refit_ate_m", fa.trans_m.rmse)
+                .Add("refit_icp_edges", static_cast<double>(refit_edges));
+          }
+        }
         const std::string file_stem =
             seeds.size() > 1 ? in.name + "-s" + std::to_string(seed) : in.name;
         const std::string png = png_dir + "/" + file_stem + ".png";
@@ -438,7 +524,10 @@ int main(int argc, char** argv) {
             "; factor_chi2 = e^T Omega e of the sequential ICP factors against the reference "
             "(calibrated: median ~2.4), loop_chi2 the same for loop closures" +
             "; ICP factors failed " + std::to_string(st.icp_failures) +
-            "; ms_per_item = every scan, ms_per_processed = scans the filter ran on";
+            "; ms_per_item = every scan, ms_per_processed = scans the filter ran on" +
+            (refit ? "; refit_ate_m = ATE of the data's own optimum (odometry + ICP edges) solved "
+                     "from the reference (reference_refit.hpp)"
+                   : "");
         seed_runs.push_back(run);
         report.AddRun(run);
       } catch (const std::exception& e) {

@@ -33,15 +33,28 @@ void PoseGraph2D::AddEdge(const PoseGraphEdge& e) {
   edges_.push_back(e);
 }
 
-double PoseGraph2D::Optimize(int max_iterations, bool* converged) {
-  if (nodes_.empty()) return 0.0;
-  ceres::Problem problem;
+void PoseGraph2D::BuildProblem(ceres::Problem* problem) {
   for (const PoseGraphEdge& e : edges_) {
     if (!e.enabled) continue;
     ceres::LossFunction* loss = e.huber_scale > 0 ? new ceres::HuberLoss(e.huber_scale) : nullptr;
-    problem.AddResidualBlock(RelativePose2Cost::Create(e.T_i_j, e.information), loss,
-                             nodes_[e.i].data(), nodes_[e.j].data());
+    problem->AddResidualBlock(RelativePose2Cost::Create(e.T_i_j, e.information), loss,
+                              nodes_[e.i].data(), nodes_[e.j].data());
   }
+}
+
+double PoseGraph2D::Cost() {
+  if (nodes_.empty()) return 0.0;
+  ceres::Problem problem;
+  BuildProblem(&problem);
+  double cost = 0.0;
+  problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr);
+  return cost;
+}
+
+double PoseGraph2D::Optimize(int max_iterations, bool* converged) {
+  if (nodes_.empty()) return 0.0;
+  ceres::Problem problem;
+  BuildProblem(&problem);
   if (problem.HasParameterBlock(nodes_[0].data())) problem.SetParameterBlockConstant(nodes_[0].data());
   ceres::Solver::Options opts;
   opts.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;

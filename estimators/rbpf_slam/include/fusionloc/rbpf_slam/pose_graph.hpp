@@ -66,6 +66,8 @@ class PoseGraph2D {
   // Levenberg-Marquardt with sparse Cholesky; node 0 is held fixed. Returns the final cost
   // (½ Σ squared whitened residuals); `converged` tells whether Ceres reported convergence.
   double Optimize(int max_iterations, bool* converged = nullptr);
+  // ½ Σ squared whitened (robustified) residuals of the enabled edges at the current poses.
+  double Cost();
 
   int num_nodes() const { return static_cast<int>(nodes_.size()); }
   int num_edges() const { return static_cast<int>(edges_.size()); }
@@ -80,6 +82,8 @@ class PoseGraph2D {
   }
 
  private:
+  void BuildProblem(ceres::Problem* problem);  // one residual block per enabled edge
+
   std::vector<std::array<double, 3>> nodes_;
   std::vector<PoseGraphEdge> edges_;
 };
