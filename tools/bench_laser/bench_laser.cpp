@@ -298,6 +298,7 @@ int main(int argc, char** argv) {
               << ": expected a finite scale >= 0 (1 = the importer's noise model, 0 = none)\n";
     return 2;
   }
+  const fl::importers::CarmenNoiseModel noise = ScaledNoise(noise_scale);
   std::vector<uint64_t> seeds;
   for (size_t a = 0, b; a < seeds_text.size(); a = b + 1) {
     b = seeds_text.find(',', a);
@@ -386,7 +387,7 @@ int main(int argc, char** argv) {
         } else {
           fl::importers::CarmenOptions co;
           co.seed = seed;
-          co.noise = ScaledNoise(noise_scale);
+          co.noise = noise;
           const std::string lcm_log = tmp + "/" + in.name + ".lcmlog";
           if (!in.reference.empty()) co.noisy_odometry = "false";
           // csail-corrected.log.gz printed its time stamps with 6 significant digits: take them
@@ -496,7 +497,6 @@ int main(int argc, char** argv) {
             .Add("peak_rss_mb", fl::bench::PeakRssMb());
         if (refit && in.sim_config.empty()) {
           int refit_edges = 0;
-          const fl::importers::CarmenNoiseModel noise = ScaledNoise(noise_scale);
           const fl::eval::Trajectory fitted =
               Refit(data, run_options, in.reference.empty() ? &noise : nullptr, max_dt,
                     refit_options, &refit_edges);

@@ -104,19 +104,26 @@ fl::Pose2 RbpfSlam::CurrentPose() const {
 
 const TiledGrid& RbpfSlam::BestMap() const { return particles_[best_].map; }
 
-void RbpfSlam::ConvertScan(const LaserScan& scan, ScanResult* result) {
-  hits_base_.clear();
-  const double c = std::cos(T_base_laser_.theta), s = std::sin(T_base_laser_.theta);
+int ScanToBasePoints(const LaserScan& scan, const fl::Pose2& T_base_laser, double max_range,
+                     std::vector<Eigen::Vector2d>* points_base) {
+  points_base->clear();
+  int left_out = 0;
+  const double c = std::cos(T_base_laser.theta), s = std::sin(T_base_laser.theta);
   for (size_t k = 0; k < scan.ranges.size(); ++k) {
     const float r = scan.ranges[k];
-    if (!std::isfinite(r) || r <= 0.0f || r > opt_.grid.max_range) {
-      ++stats_.invalid_beams;
+    if (!std::isfinite(r) || r <= 0.0f || r > max_range) {
+      ++left_out;
       continue;
     }
     const double a = scan.rad0 + static_cast<double>(k) * scan.radstep;
     const double lx = r * std::cos(a), ly = r * std::sin(a);
-    hits_base_.emplace_back(T_base_laser_.x + c * lx - s * ly, T_base_laser_.y + s * lx + c * ly);
+    points_base->emplace_back(T_base_laser.x + c * lx - s * ly, T_base_laser.y + s * lx + c * ly);
   }
+  return left_out;
+}
+
+void RbpfSlam::ConvertScan(const LaserScan& scan, ScanResult* result) {
+  stats_.invalid_beams += ScanToBasePoints(scan, T_base_laser_, opt_.grid.max_range, &hits_base_);
   match_base_.clear();
   for (size_t k = 0; k < hits_base_.size(); k += opt_.matcher.beam_step) {
     match_base_.push_back(hits_base_[k]);

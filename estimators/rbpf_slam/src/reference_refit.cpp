@@ -8,6 +8,7 @@
 
 #include "fusionloc/rbpf_slam/icp.hpp"
 #include "fusionloc/rbpf_slam/pose_graph.hpp"
+#include "fusionloc/rbpf_slam/rbpf_slam.hpp"
 
 namespace fl::rbpf {
 
@@ -63,12 +64,7 @@ RefitResult RefitReference(const std::vector<RefitScan>& scans, const RbpfSlamOp
       throw std::invalid_argument("RefitReference: scan " + std::to_string(k) + " (utime " +
                                   std::to_string(s.utime) + ") is not after the previous one");
     }
-    for (size_t b = 0; b < s.ranges.size(); ++b) {
-      const float r = s.ranges[b];
-      if (!std::isfinite(r) || r <= 0.0f || r > options.grid.max_range) continue;
-      const double a = s.rad0 + static_cast<double>(b) * s.radstep;
-      points[k].push_back(T_base_laser * Eigen::Vector2d(r * std::cos(a), r * std::sin(a)));
-    }
+    ScanToBasePoints(s, T_base_laser, options.grid.max_range, &points[k]);
     normals[k] =
         ComputeNormals(points[k], options.icp.normal_radius, options.icp.normal_max_eigen_ratio);
   }

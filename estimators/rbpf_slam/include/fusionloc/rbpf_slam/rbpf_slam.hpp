@@ -46,6 +46,11 @@ struct ScanResult {
   int valid_beams = 0;            // beams used (others were NaN, inf, <= 0 or over range)
 };
 
+// The valid beams of `scan` (finite, > 0 and <= max_range) as points in the base frame, in
+// beam order; `points_base` is cleared first. Returns the number of beams left out.
+int ScanToBasePoints(const LaserScan& scan, const fl::Pose2& T_base_laser, double max_range,
+                     std::vector<Eigen::Vector2d>* points_base);
+
 struct RbpfSlamStats {
   int64_t scans = 0;                    // accepted scans
   int64_t processed = 0;                // scans the filter ran on
