@@ -477,6 +477,7 @@ int main(int argc, char** argv) {
             .Add("loop_searches", static_cast<double>(st.loop_searches))
             .Add("searches_skipped", static_cast<double>(st.loop_searches_skipped))
             .Add("loop_rejections", static_cast<double>(st.loop_rejections))
+            .Add("optimizations", static_cast<double>(st.optimizations))
             .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
             .Add("rebuilds_continued", static_cast<double>(st.map_rebuilds_continued))
             .Add("divergences", static_cast<double>(st.divergences))

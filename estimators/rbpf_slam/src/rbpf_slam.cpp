@@ -605,6 +605,7 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   for (int k = 0; k < graph_.num_nodes(); ++k) before[k] = graph_.pose(k);
   // Optimise; a loop edge the solution still disagrees with grossly is wrong: drop the worst
   // one and optimise again (from the original values).
+  ++stats_.optimizations;
   for (int round = 0; round < 5; ++round) {
     graph_.Optimize(g.max_iterations);
     int worst = -1;

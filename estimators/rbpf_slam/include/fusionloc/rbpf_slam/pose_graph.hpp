@@ -5,6 +5,8 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <deque>
+#include <memory>
 #include <vector>
 
 #include "fusionloc/common/geometry.hpp"
@@ -59,8 +61,23 @@ struct PoseGraphEdge {
   bool loop_closure = false; // a loop closure (may be rejected after optimisation)
 };
 
+// The Ceres problem is kept between optimisations: new edges are appended to it, and it is
+// rebuilt (in edge order, so the same problem a fresh build gives) only after an edge was
+// disabled. Copies start with no problem and build their own.
 class PoseGraph2D {
  public:
+  PoseGraph2D() = default;
+  PoseGraph2D(const PoseGraph2D& other) : nodes_(other.nodes_), edges_(other.edges_) {}
+  PoseGraph2D& operator=(const PoseGraph2D& other) {
+    if (this != &other) {
+      nodes_ = other.nodes_;
+      edges_ = other.edges_;
+      problem_.reset();
+      edges_in_problem_ = 0;
+    }
+    return *this;
+  }
+
   int AddNode(const fl::Pose2& T_world_node);
   void AddEdge(const PoseGraphEdge& edge);
   // Levenberg-Marquardt with sparse Cholesky; node 0 is held fixed. Returns the final cost
@@ -74,7 +91,10 @@ class PoseGraph2D {
   fl::Pose2 pose(int i) const { return {nodes_[i][0], nodes_[i][1], nodes_[i][2]}; }
   void set_pose(int i, const fl::Pose2& p) { nodes_[i] = {p.x, p.y, p.theta}; }
   const std::vector<PoseGraphEdge>& edges() const { return edges_; }
-  void DisableEdge(int k) { edges_.at(k).enabled = false; }
+  void DisableEdge(int k) {
+    edges_.at(k).enabled = false;
+    problem_.reset();  // rebuilt without it at the next Optimize / Cost
+  }
   // Error of edge k at the current poses: T_i_j^-1 * (pose(i)^-1 * pose(j)).
   fl::Pose2 EdgeError(int k) const {
     const PoseGraphEdge& e = edges_.at(k);
@@ -82,10 +102,15 @@ class PoseGraph2D {
   }
 
  private:
-  void BuildProblem(ceres::Problem* problem);  // one residual block per enabled edge
+  // Brings problem_ up to date: one residual block per enabled edge, in edge order; node 0
+  // held constant.
+  void SyncProblem();
 
-  std::vector<std::array<double, 3>> nodes_;
+  // A deque: the problem points into the nodes, and push_back keeps them where they are.
+  std::deque<std::array<double, 3>> nodes_;
   std::vector<PoseGraphEdge> edges_;
+  std::unique_ptr<ceres::Problem> problem_;
+  int edges_in_problem_ = 0;  // edges_[0, edges_in_problem_) have been added (if enabled)
 };
 
 }  // namespace fl::rbpf

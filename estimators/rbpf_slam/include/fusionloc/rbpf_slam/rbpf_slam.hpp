@@ -70,6 +70,7 @@ struct RbpfSlamStats {
                                         //     (graph.loop_search_after_partial_overlap)
   int64_t loop_closures = 0;            // verified, added to the graph and kept
   int64_t loop_rejections = 0;          // loop edges dropped after optimisation (gross residual)
+  int64_t optimizations = 0;            // pose-graph optimisations (each up to 5 Ceres solves)
   int64_t map_rebuilds = 0;             // corrections fed back to the filter
   int64_t map_rebuilds_continued = 0;   // ... that continued the previous rebuild's map
   int64_t divergences = 0;              // keyframes where ICP from odometry overruled the filter
