@@ -1,6 +1,7 @@
 #include "fusionloc/rbpf_slam/pose_graph.hpp"
 
 #include <Eigen/Cholesky>
+#include <cmath>
 #include <stdexcept>
 
 namespace fl::rbpf {
@@ -14,8 +15,36 @@ ceres::CostFunction* RelativePose2Cost::Create(const fl::Pose2& T_i_j,
     throw std::invalid_argument("RelativePose2Cost: information matrix is not positive definite");
   }
   const Eigen::Matrix3d S = llt.matrixL().transpose();
-  return new ceres::AutoDiffCostFunction<RelativePose2Cost, 3, 3, 3>(
-      new RelativePose2Cost(T_i_j, S));
+  return new RelativePose2Cost(T_i_j, S);
+}
+
+bool RelativePose2Cost::Evaluate(double const* const* parameters, double* residuals,
+                                 double** jacobians) const {
+  const double* x_i = parameters[0];
+  const double* x_j = parameters[1];
+  const double c = std::cos(x_i[2]), s = std::sin(x_i[2]);
+  const double dx = x_j[0] - x_i[0], dy = x_j[1] - x_i[1];
+  const double u = c * dx + s * dy, v = -s * dx + c * dy;
+  const double a = x_j[2] - x_i[2] - T_i_j_.theta;
+  const double two_pi = 2.0 * M_PI;
+  const Eigen::Vector3d e(u - T_i_j_.x, v - T_i_j_.y, a - two_pi * std::floor((a + M_PI) / two_pi));
+  Eigen::Map<Eigen::Vector3d> r(residuals);
+  r = sqrt_info_ * e;
+  if (!jacobians) return true;
+  using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+  if (jacobians[0]) {
+    RowMajor3 de;
+    de << -c, -s, v, s, -c, -u, 0.0, 0.0, -1.0;
+    Eigen::Map<RowMajor3> J_i(jacobians[0]);
+    J_i = sqrt_info_ * de;
+  }
+  if (jacobians[1]) {
+    RowMajor3 de;
+    de << c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0;
+    Eigen::Map<RowMajor3> J_j(jacobians[1]);
+    J_j = sqrt_info_ * de;
+  }
+  return true;
 }
 
 int PoseGraph2D::AddNode(const fl::Pose2& T) {

@@ -14,41 +14,31 @@
 namespace fl::rbpf {
 
 // Residual of one relative-pose edge between nodes i and j (world poses x = (x, y, θ)):
-//   e_t = R(θ_i)ᵀ (t_j − t_i) − t_ij            (translation of j in frame i minus measured)
-//   e_θ = wrap(θ_j − θ_i − θ_ij)
+//   (u, v) = R(θ_i)ᵀ (t_j − t_i)                 (translation of j in frame i)
+//   e_t = (u, v) − t_ij
+//   e_θ = wrap(θ_j − θ_i − θ_ij)                 (wrap to [−π, π): a constant shift of 2πk)
 //   r   = S (e_t, e_θ),  S = upper-triangular square root of the information: SᵀS = Ω_ij.
-// With AutoDiff the Jacobians are exact; the angle wrap is a constant shift of 2πk.
-struct RelativePose2Cost {
+// Analytic Jacobians (c = cos θ_i, s = sin θ_i):
+//   ∂e/∂x_i = [ −c  −s   v ]      ∂e/∂x_j = [  c   s   0 ]
+//             [  s  −c  −u ]                [ −s   c   0 ]
+//             [  0   0  −1 ]                [  0   0   1 ]
+//   ∂r/∂x = S ∂e/∂x. (They replaced AutoDiff: the pose-graph solves are a third of the run on
+//   intel; a GradientChecker test holds them to the numeric derivatives.)
+class RelativePose2Cost : public ceres::SizedCostFunction<3, 3, 3> {
+ public:
   RelativePose2Cost(const fl::Pose2& T_i_j, const Eigen::Matrix3d& sqrt_information)
-      : t_ij_x(T_i_j.x), t_ij_y(T_i_j.y), theta_ij(T_i_j.theta), sqrt_info(sqrt_information) {}
+      : T_i_j_(T_i_j), sqrt_info_(sqrt_information) {}
 
-  template <typename T>
-  bool operator()(const T* const pose_world_i, const T* const pose_world_j, T* residual) const {
-    using std::cos;
-    using std::sin;
-    const T c = cos(pose_world_i[2]), s = sin(pose_world_i[2]);
-    const T dx = pose_world_j[0] - pose_world_i[0], dy = pose_world_j[1] - pose_world_i[1];
-    T e[3];
-    e[0] = c * dx + s * dy - T(t_ij_x);
-    e[1] = -s * dx + c * dy - T(t_ij_y);
-    e[2] = WrapAngleT(pose_world_j[2] - pose_world_i[2] - T(theta_ij));
-    for (int r = 0; r < 3; ++r) {
-      residual[r] = T(sqrt_info(r, 0)) * e[0] + T(sqrt_info(r, 1)) * e[1] + T(sqrt_info(r, 2)) * e[2];
-    }
-    return true;
-  }
+  // parameters[0] = pose_world_i, parameters[1] = pose_world_j (x, y, θ each).
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
 
-  template <typename T>
-  static T WrapAngleT(const T& a) {
-    using std::floor;
-    const T two_pi(2.0 * M_PI);
-    return a - two_pi * floor((a + T(M_PI)) / two_pi);
-  }
-
+  // Throws std::invalid_argument if `information` is not positive definite.
   static ceres::CostFunction* Create(const fl::Pose2& T_i_j, const Eigen::Matrix3d& information);
 
-  double t_ij_x, t_ij_y, theta_ij;
-  Eigen::Matrix3d sqrt_info;
+ private:
+  fl::Pose2 T_i_j_;
+  Eigen::Matrix3d sqrt_info_;
 };
 
 struct PoseGraphEdge {
