@@ -479,6 +479,11 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
   o = RbpfSlamOptions();
   o.matcher.degeneracy_ratio = -0.1;
   EXPECT_NE(o.Validate().message().find("matcher.degeneracy_ratio"), std::string::npos);
+  for (double bad : {-1e-4, 1.0}) {
+    o = RbpfSlamOptions();
+    o.matcher.function_tolerance = bad;
+    EXPECT_NE(o.Validate().message().find("matcher.function_tolerance"), std::string::npos) << bad;
+  }
   o = RbpfSlamOptions();
   o.graph.edge_sigma = -1.0;
   EXPECT_NE(o.Validate().message().find("graph.edge_sigma"), std::string::npos);

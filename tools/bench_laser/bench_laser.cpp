@@ -478,6 +478,9 @@ int main(int argc, char** argv) {
             .Add("searches_skipped", static_cast<double>(st.loop_searches_skipped))
             .Add("loop_rejections", static_cast<double>(st.loop_rejections))
             .Add("optimizations", static_cast<double>(st.optimizations))
+            .Add("match_evals",
+                 static_cast<double>(st.matcher_evaluations) /
+                     std::max<double>(1.0, static_cast<double>(st.processed * options.particles)))
             .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
             .Add("rebuilds_continued", static_cast<double>(st.map_rebuilds_continued))
             .Add("divergences", static_cast<double>(st.divergences))

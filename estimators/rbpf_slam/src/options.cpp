@@ -74,6 +74,10 @@ Status MatcherOptions::Validate() const {
   if (beam_step < 1) return Status::Error("matcher.beam_step must be >= 1");
   if (max_iterations < 0) return Status::Error("matcher.max_iterations must be >= 0");
   FL_RETURN_IF_ERROR(Positive("matcher.converged_step", converged_step));
+  FL_RETURN_IF_ERROR(NonNegative("matcher.function_tolerance", function_tolerance));
+  if (function_tolerance >= 1.0) {
+    return Status::Error("matcher.function_tolerance must be below 1 (a fraction of the cost)");
+  }
   FL_RETURN_IF_ERROR(Positive("matcher.sigma", sigma));
   FL_RETURN_IF_ERROR(Positive("matcher.z_hit", z_hit));
   FL_RETURN_IF_ERROR(Positive("matcher.z_rand", z_rand));

@@ -249,6 +249,7 @@ void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res)
     const fl::Pose2 predicted = p.pose * noisy;
     const MatchResult mr = MatchScan(p.map, match_base_, predicted, mo);
     if (!mr.ok) ++stats_.match_failures;
+    stats_.matcher_evaluations += mr.evaluations;
     if (mr.degenerate_dims > 0) ++stats_.degenerate_matches;
     p.pose = mr.T_world_base;
     p.log_w += mr.log_likelihood / opt_.matcher.likelihood_gain;

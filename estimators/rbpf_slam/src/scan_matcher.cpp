@@ -133,6 +133,7 @@ MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>&
   Eigen::Vector3d g;
   int n = 0;
   double cost = Evaluate(grid, pts, use, T, dmax, &H, &g, &n);
+  r.evaluations = 1;
   double lambda = 1e-3;
   double length_sq = 0.0;
   for (const Eigen::Vector2d& p : pts) length_sq += p.squaredNorm();
@@ -152,9 +153,11 @@ MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>&
       if (!delta.allFinite()) break;
       const fl::Pose2 T_new(T.x + delta.x(), T.y + delta.y(), fl::WrapAngle(T.theta + delta.z()));
       const double cost_new = Evaluate(grid, pts, use, T_new, dmax, &H_new, &g_new, &n_new);
+      ++r.evaluations;
       if (cost_new < cost) {
         const bool small =
-            delta.head<2>().norm() < o.converged_step && std::abs(delta.z()) < o.converged_step;
+            (delta.head<2>().norm() < o.converged_step && std::abs(delta.z()) < o.converged_step) ||
+            cost - cost_new < o.function_tolerance * cost;
         T = T_new;
         cost = cost_new;
         H = H_new;

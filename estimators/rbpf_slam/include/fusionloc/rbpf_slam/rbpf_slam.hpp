@@ -61,6 +61,7 @@ struct RbpfSlamStats {
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates that fell back to odometry
+  int64_t matcher_evaluations = 0;      // scan-matcher cost evaluations (passes over the points)
   int64_t degenerate_matches = 0;       // particle updates with a degenerate direction (corridor)
   int64_t keyframes = 0;
   int64_t icp_failures = 0;             // sequential keyframe ICP that failed verification

@@ -35,6 +35,7 @@ struct MatchResult {
   int inliers = 0;              // points inside the field at T_world_base
   int degenerate_dims = 0;      // directions left at the initial pose (see above)
   bool ok = false;              // converged, enough inliers, correction within bounds
+  int evaluations = 0;          // cost evaluations (passes over the points) of the search
 };
 
 // Projector P (in (x, y, θ)) removing the degenerate components of a step, δ' = P δ, for a
