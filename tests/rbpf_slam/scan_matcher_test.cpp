@@ -85,12 +85,16 @@ void RoomMapAndScan(const fl::Pose2& truth, TiledGrid* g, std::vector<Eigen::Vec
   }
 }
 
-TEST(ScanMatcher, RecoversAPerturbedPoseInTheRoom) {
-  GridOptions go;
-  TiledGrid g(go);
-  const fl::Pose2 truth(-6.0, -4.5, 0.3);
+// The room's map and the scan taken at `truth` in it.
+class RoomMatch : public ::testing::Test {
+ protected:
+  void SetUp() override { RoomMapAndScan(truth, &g, &pts); }
+  TiledGrid g{GridOptions()};
+  const fl::Pose2 truth{-6.0, -4.5, 0.3};
   std::vector<Eigen::Vector2d> pts;
-  RoomMapAndScan(truth, &g, &pts);
+};
+
+TEST_F(RoomMatch, RecoversAPerturbedPoseInTheRoom) {
   MatcherOptions mo;
   mo.max_iterations = 30;
   const fl::Pose2 start = truth * fl::Pose2(0.12, -0.08, 0.06);
@@ -104,12 +108,7 @@ TEST(ScanMatcher, RecoversAPerturbedPoseInTheRoom) {
 
 // The function tolerance ends the search once the steps stop paying: from the same starts it
 // lands where the full search does (within a millimetre) with fewer passes over the points.
-TEST(ScanMatcher, FunctionToleranceStopsEarlierAtTheSamePose) {
-  GridOptions go;
-  TiledGrid g(go);
-  const fl::Pose2 truth(-6.0, -4.5, 0.3);
-  std::vector<Eigen::Vector2d> pts;
-  RoomMapAndScan(truth, &g, &pts);
+TEST_F(RoomMatch, FunctionToleranceStopsEarlierAtTheSamePose) {
   MatcherOptions full;
   full.max_iterations = 30;
   full.function_tolerance = 0.0;
