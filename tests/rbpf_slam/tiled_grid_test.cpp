@@ -206,6 +206,38 @@ TEST(TiledGrid, RaysClearExactlyTheirBresenhamCellsUpToTheMargin) {
   }
 }
 
+TEST(TiledGrid, LongRaysClearTheirBresenhamCellsAcrossTiles) {
+  // Rays of up to 3 tiles from a cell next to a tile corner, in every octant and through tile
+  // corners (slope 1): the ray's tile is followed step by step.
+  const int ox = kTileSize - 1, oy = -1;  // the corner cell of tile (0, -1)
+  std::vector<std::pair<int, int>> ends;
+  for (int a = -3 * kTileSize; a <= 3 * kTileSize; a += 37) {
+    for (const int b : {-3 * kTileSize, -kTileSize - 5, kTileSize + 3, 3 * kTileSize}) {
+      ends.emplace_back(a, b);
+      ends.emplace_back(b, a);
+    }
+    ends.emplace_back(a, a);
+    ends.emplace_back(a, -a);
+  }
+  for (const auto& [ex, ey] : ends) {
+    TiledGrid g(Opts());
+    const Eigen::Vector2d origin((ox + 0.5) * 0.05, (oy + 0.5) * 0.05);
+    const Eigen::Vector2d end((ox + ex + 0.5) * 0.05, (oy + ey + 0.5) * 0.05);
+    g.IntegrateScan(origin, {end}, {0});
+    std::vector<std::pair<int, int>> expected = ClearedCells(ox, oy, ox + ex, oy + ey, false, 0);
+    for (const auto& [x, y] : expected) {
+      ASSERT_LT(g.LogOdds(x, y), 0.0f) << "end " << ex << "," << ey << " cell " << x << "," << y;
+    }
+    // Nothing else: the number of observed cells is the line's.
+    int min_cx, min_cy, max_cx, max_cy, observed = 0;
+    ASSERT_TRUE(g.Bounds(&min_cx, &min_cy, &max_cx, &max_cy));
+    for (int y = min_cy; y < max_cy; ++y) {
+      for (int x = min_cx; x < max_cx; ++x) observed += g.IsKnown(x, y) ? 1 : 0;
+    }
+    EXPECT_EQ(observed, static_cast<int>(expected.size())) << "end " << ex << "," << ey;
+  }
+}
+
 TEST(TiledGrid, CopyOnWriteCopiesOnlyTheTileWrittenTo) {
   TiledGrid a(Opts());
   MakeObstacle(&a, 0, 0);
