@@ -45,12 +45,12 @@ double ScanLogLikelihood(const TiledGrid& grid, const std::vector<Eigen::Vector2
 }
 
 namespace {
-// The matcher's cost, the sum of squared (saturated) distances over the points in `use`, and, over
-// the points inside the field (d < dmax), the Gauss-Newton Hessian H = Σ JᵀJ and gradient g = Σ Jᵀd
-// in one pass: an accepted step's pass is the next iteration's.
-double Evaluate(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
-                const std::vector<uint8_t>& use, const fl::Pose2& T, double dmax,
-                Eigen::Matrix3d* H, Eigen::Vector3d* g, int* n) {
+// The matcher's cost, the sum of squared (saturated) distances over `pts` (MatchScan passes the
+// points in observed cells), and, over the points inside the field (d < dmax), the Gauss-Newton
+// Hessian H = Σ JᵀJ and gradient g = Σ Jᵀd in one pass: an accepted step's pass is the next
+// iteration's.
+double Evaluate(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts, const fl::Pose2& T,
+                double dmax, Eigen::Matrix3d* H, Eigen::Vector3d* g, int* n) {
   const double c = std::cos(T.theta), s = std::sin(T.theta);
   // Sums in locals: the field is read as bytes, which may alias any memory, so sums kept in
   // *H and *g would be stored and reloaded for every point. H is symmetric: its upper triangle
@@ -60,7 +60,6 @@ double Evaluate(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts,
   double g0 = 0.0, g1 = 0.0, g2 = 0.0;
   int count = 0;
   for (size_t i = 0; i < pts.size(); ++i) {
-    if (!use[i]) continue;
     const Eigen::Vector2d& p = pts[i];
     const Eigen::Vector2d w(T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y());
     Eigen::Vector2d grad;
@@ -119,20 +118,19 @@ MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>&
   fl::Pose2 T = initial;
   // Points in cells the map never observed are left out (fixed at the initial pose so that the
   // cost compares like with like).
-  thread_local std::vector<uint8_t> use;
-  use.assign(pts.size(), 1);
+  thread_local std::vector<Eigen::Vector2d> used;
+  used.clear();
   {
     const double c = std::cos(T.theta), s = std::sin(T.theta);
-    for (size_t i = 0; i < pts.size(); ++i) {
-      const Eigen::Vector2d& p = pts[i];
+    for (const Eigen::Vector2d& p : pts) {
       const Eigen::Vector2d w(T.x + c * p.x() - s * p.y(), T.y + s * p.x() + c * p.y());
-      use[i] = Observed(grid, p, w, c, s, o) ? 1 : 0;
+      if (Observed(grid, p, w, c, s, o)) used.push_back(p);
     }
   }
   Eigen::Matrix3d H;
   Eigen::Vector3d g;
   int n = 0;
-  double cost = Evaluate(grid, pts, use, T, dmax, &H, &g, &n);
+  double cost = Evaluate(grid, used, T, dmax, &H, &g, &n);
   r.evaluations = 1;
   double lambda = 1e-3;
   double length_sq = 0.0;
@@ -152,7 +150,7 @@ MatchResult MatchScan(const TiledGrid& grid, const std::vector<Eigen::Vector2d>&
       const Eigen::Vector3d delta = P * (-A.ldlt().solve(g));
       if (!delta.allFinite()) break;
       const fl::Pose2 T_new(T.x + delta.x(), T.y + delta.y(), fl::WrapAngle(T.theta + delta.z()));
-      const double cost_new = Evaluate(grid, pts, use, T_new, dmax, &H_new, &g_new, &n_new);
+      const double cost_new = Evaluate(grid, used, T_new, dmax, &H_new, &g_new, &n_new);
       ++r.evaluations;
       if (cost_new < cost) {
         const bool small =
