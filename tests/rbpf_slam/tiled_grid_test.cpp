@@ -70,6 +70,28 @@ TEST(TiledGrid, IntegrateScanClearsFreeSpaceAndMarksHits) {
   EXPECT_FALSE(g.IsKnown(g.CellX(1.0), 5));
 }
 
+TEST(TiledGrid, FreeSpaceBeamStepClearsAlongEveryNthBeamAndMarksEveryHit) {
+  // Four beams of 1 m (+x, +y, -x, -y): with step n, beams 0, n, 2n, ... clear their cells;
+  // every beam's end cell becomes an obstacle.
+  const std::vector<Eigen::Vector2d> dirs = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
+  const Eigen::Vector2d origin(0.026, 0.026);  // inside cell (0, 0)
+  for (int step = 1; step <= 3; ++step) {
+    GridOptions o = Opts();
+    o.free_space_beam_step = step;
+    TiledGrid g(o);
+    std::vector<Eigen::Vector2d> ends;
+    for (const Eigen::Vector2d& d : dirs) ends.push_back(origin + 1.0 * d);
+    g.IntegrateScan(origin, ends, std::vector<uint8_t>(ends.size(), 1));
+    for (size_t k = 0; k < dirs.size(); ++k) {
+      const Eigen::Vector2d mid = origin + 0.5 * dirs[k];
+      const bool cleared = g.LogOdds(g.CellX(mid.x()), g.CellX(mid.y())) < 0.0f;
+      EXPECT_EQ(cleared, k % step == 0) << "step " << step << " beam " << k;
+      EXPECT_TRUE(g.IsOccupied(g.CellX(ends[k].x()), g.CellX(ends[k].y())))
+          << "step " << step << " beam " << k;
+    }
+  }
+}
+
 TEST(TiledGrid, BatchBuildEqualsScanByScanIntegration) {
   // Scans from several origins over a few walls (hits that later get cleared, grazing rays,
   // negative coordinates, several tiles); the batch field must equal the incremental one.
