@@ -301,7 +301,8 @@ void RbpfSlam::IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
                              const std::vector<Eigen::Vector2d>& points_base) {
   endpoints_world_.resize(points_base.size());
   is_hit_.assign(points_base.size(), 1);
-  for (size_t k = 0; k < points_base.size(); ++k) endpoints_world_[k] = T_world_base * points_base[k];
+  for (size_t k = 0; k < points_base.size(); ++k)
+    endpoints_world_[k] = T_world_base * points_base[k];
   map->IntegrateScan(T_world_base * T_base_laser_.translation(), endpoints_world_, is_hit_);
 }
 
@@ -415,19 +416,30 @@ bool RbpfSlam::SearchLostTrack(int i, int j, const fl::Pose2& pose,
   if (icp_from_filter) {
     start = T_world_i * icp_from_filter->T_ref_query;
   } else {
-    const CorrelativeResult cr = CorrelativeMatch(keyframes_[i].points_base,
-                                                  keyframes_[j].points_base,
-                                                  T_world_i.between(pose), g.recovery_search);
-    if (!cr.ok || cr.at_window_edge || cr.score < g.recovery_search.min_score) return false;
+    // Around the filter's relative pose and, where the odometry's differs, around that too
+    // (the filter may have been pulled away from a right odometry step); the better score wins.
+    auto usable = [&](const CorrelativeResult& r) {
+      return r.ok && !r.at_window_edge && r.score >= g.recovery_search.min_score;
+    };
+    const fl::Pose2 filter_rel = T_world_i.between(pose);
+    CorrelativeResult cr = CorrelativeMatch(keyframes_[i].points_base, keyframes_[j].points_base,
+                                            filter_rel, g.recovery_search);
+    const fl::Pose2 odom_rel = keyframes_[i].odom.between(keyframes_[j].odom);
+    if (g.recovery_search_from_odometry && Beyond(filter_rel.between(odom_rel), 0.05, 0.03)) {
+      const CorrelativeResult from_odom = CorrelativeMatch(
+          keyframes_[i].points_base, keyframes_[j].points_base, odom_rel, g.recovery_search);
+      if (usable(from_odom) && (!usable(cr) || from_odom.score > cr.score)) cr = from_odom;
+    }
+    if (!usable(cr)) return false;
     start = T_world_i * cr.T_ref_query;
   }
   const MatchResult mr = MatchScan(map_before_scan, match_base_, start, opt_.matcher);
   const fl::Pose2 candidate = mr.ok ? mr.T_world_base : start;
   // The map decides: the scan must fit it clearly better there than where the filter put it.
   const double n = static_cast<double>(match_base_.size());
-  const double gain =
-      (ScanLogLikelihood(map_before_scan, match_base_, candidate, opt_.matcher) -
-       ScanLogLikelihood(map_before_scan, match_base_, pose, opt_.matcher)) / n;
+  const double gain = (ScanLogLikelihood(map_before_scan, match_base_, candidate, opt_.matcher) -
+                       ScanLogLikelihood(map_before_scan, match_base_, pose, opt_.matcher)) /
+                      n;
   if (!(gain >= g.recovery_min_gain)) return false;
   *corrected = candidate;
   const fl::Pose2 T_i_j = T_world_i.between(candidate);
@@ -472,8 +484,8 @@ PoseGraphEdge RbpfSlam::FilterEdge(int i, int j) const {
   const double k = g.filter_edge_sigma_scale;
   const double s_xy = std::max(k * (m.srr * d + m.srt * r), g.filter_edge_min_sigma_m);
   const double s_th = std::max(k * (m.stt * r + m.str * d), g.filter_edge_min_sigma_rad);
-  e.information = Eigen::Vector3d(1.0 / (s_xy * s_xy), 1.0 / (s_xy * s_xy), 1.0 / (s_th * s_th))
-                      .asDiagonal();
+  e.information =
+      Eigen::Vector3d(1.0 / (s_xy * s_xy), 1.0 / (s_xy * s_xy), 1.0 / (s_th * s_th)).asDiagonal();
   e.huber_scale = g.filter_edge_huber;
   return e;
 }
