@@ -81,6 +81,31 @@ double MaxTrajectoryError(const RbpfSlamOptions& o, const test::LoopRun& run,
   return err;
 }
 
+// The room loop in 0.25 m steps with nearly exact odometry.
+test::LoopRun NearExactOdometryLoop() {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  lo.odom_trans_noise = 0.002;
+  lo.odom_rot_noise = 0.001;
+  lo.odom_rot_bias = 0.0;
+  return test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+}
+
+// A crippled one-particle filter for NearExactOdometryLoop(): its motion model samples heading
+// errors of `heading_sigma_per_m` [rad/m] and its matcher may correct only 0.01 rad, so it
+// drifts away from the truth unless a keyframe check catches it. No loop search; every scan
+// goes to the filter (the turn gate is tested on its own).
+RbpfSlamOptions CrippledFilterOptions(int seed, double heading_sigma_per_m) {
+  RbpfSlamOptions o = TestOptions(1);
+  o.seed = seed;
+  o.motion.stt = 0.0;
+  o.motion.str = heading_sigma_per_m;
+  o.matcher.max_correction_rad = 0.01;
+  o.graph.loop_search.enabled = false;
+  o.max_turn_rate = 0.0;
+  return o;
+}
+
 TEST(RbpfSlam, ResamplesOnlyWhenNeffDropsBelowTheThreshold) {
   const test::LoopRun run = RoomLoopRun(1);
   for (double threshold : {0.0, 0.5, 1.0}) {
@@ -258,23 +283,11 @@ TEST(RbpfSlam, DivergedFilterIsCaughtByIcpFromOdometry) {
   // with the check most seeds stay within decimetres (2026-11-30: 0.13-0.15 m on three of five,
   // 2.3 and 3.6 m on the others), without it none does (6-23 m). The lost-track search, a second
   // safety net for the same failure, is off in both runs.
-  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
-  test::LoopRunOptions lo;
-  lo.step_m = 0.25;
-  lo.odom_trans_noise = 0.002;
-  lo.odom_rot_noise = 0.001;
-  lo.odom_rot_bias = 0.0;
-  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  const test::LoopRun run = NearExactOdometryLoop();
   auto max_error = [&](bool check, int seed, RbpfSlamStats* stats) {
-    RbpfSlamOptions o = TestOptions(1);
-    o.seed = seed;
-    o.motion.stt = 0.0;
-    o.motion.str = 0.4;  // [rad/m]: ~0.1 rad per 0.25 m step
-    o.matcher.max_correction_rad = 0.01;
+    RbpfSlamOptions o = CrippledFilterOptions(seed, 0.4);  // ~0.1 rad per 0.25 m step
     o.graph.divergence_check = check;
-    o.graph.loop_search.enabled = false;
     o.graph.recovery_search.enabled = false;  // the other safety net (tested on its own)
-    o.max_turn_rate = 0.0;  // every scan goes to the filter (the turn gate is tested on its own)
     return MaxTrajectoryError(o, run, stats);
   };
   std::vector<double> with, without;
@@ -335,23 +348,11 @@ TEST(RbpfSlam, LostTrackSearchAlsoLooksAroundTheOdometry) {
   // scenario is chaotic (one keyframe placed wrong spoils the rest), so the test looks at the
   // median of five seeds (2026-12-01: with the odometry's search 0.13, 0.24, 0.86, 1.5, 5.2 m;
   // without it 11-36 m).
-  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
-  test::LoopRunOptions lo;
-  lo.step_m = 0.25;
-  lo.odom_trans_noise = 0.002;
-  lo.odom_rot_noise = 0.001;
-  lo.odom_rot_bias = 0.0;
-  const test::LoopRun run = test::MakeLoopRun(world, lo);
+  const test::LoopRun run = NearExactOdometryLoop();
   auto max_error = [&](bool from_odometry, int seed, RbpfSlamStats* stats) {
-    RbpfSlamOptions o = TestOptions(1);
-    o.seed = seed;
-    o.motion.stt = 0.0;
-    o.motion.str = 1.0;  // [rad/m]: ~0.25 rad per 0.25 m step
-    o.matcher.max_correction_rad = 0.01;
+    RbpfSlamOptions o = CrippledFilterOptions(seed, 1.0);  // ~0.25 rad per 0.25 m step
     o.graph.divergence_check = false;
-    o.graph.loop_search.enabled = false;
     o.graph.recovery_search_from_odometry = from_odometry;
-    o.max_turn_rate = 0.0;
     return MaxTrajectoryError(o, run, stats);
   };
   std::vector<double> with, without;
