@@ -64,6 +64,34 @@ TEST(PoseGraph2D, LoopClosureCorrectsDrift) {
   EXPECT_THROW(g.AddEdge({0, 77, fl::Pose2(), info, 0.0}), std::invalid_argument);
 }
 
+// A loose function tolerance stops the solve while steps still lower the cost by a few per cent:
+// its cost stays above the converged one, which the default tolerance reaches.
+TEST(PoseGraph2D, FunctionToleranceStopsEarly) {
+  auto make = [] {
+    PoseGraph2D g;
+    std::vector<fl::Pose2> truth;
+    fl::Pose2 p;
+    for (int k = 0; k < 40; ++k) {
+      truth.push_back(p);
+      p = p * fl::Pose2(0.5, 0, (k % 10 == 9) ? M_PI / 2 : 0.0);
+    }
+    fl::Pose2 drifted;
+    for (int k = 0; k < 40; ++k) {
+      g.AddNode(drifted);
+      if (k + 1 < 40) drifted = drifted * truth[k].between(truth[k + 1]) * fl::Pose2(0, 0, 0.05);
+    }
+    const Eigen::Matrix3d info = Eigen::Vector3d(1e4, 1e4, 1e4).asDiagonal();
+    for (int k = 0; k + 1 < 40; ++k) g.AddEdge({k, k + 1, truth[k].between(truth[k + 1]), info, 0.0});
+    g.AddEdge({39, 0, truth[39].between(truth[0]), info, 1.0});
+    return g;
+  };
+  PoseGraph2D tight = make(), loose = make();
+  const double tight_cost = tight.Optimize(50);
+  const double loose_cost = loose.Optimize(50, nullptr, 0.5);
+  EXPECT_LT(tight_cost, 1e-12);
+  EXPECT_GT(loose_cost, 1e-6);
+}
+
 // The graph keeps its Ceres problem between optimisations. Grown in stages, with a wrong loop
 // closure added and then disabled, it must give what a graph built at once from the same edges
 // and start values gives (a copy builds its problem afresh).

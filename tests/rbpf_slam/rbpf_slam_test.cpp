@@ -539,6 +539,9 @@ TEST(RbpfSlamOptions, ValidateNamesTheProblem) {
     o = RbpfSlamOptions();
     o.matcher.function_tolerance = bad;
     EXPECT_NE(o.Validate().message().find("matcher.function_tolerance"), std::string::npos) << bad;
+    o = RbpfSlamOptions();
+    o.graph.function_tolerance = bad;
+    EXPECT_NE(o.Validate().message().find("graph.function_tolerance"), std::string::npos) << bad;
   }
   o = RbpfSlamOptions();
   o.graph.edge_sigma = -1.0;

@@ -179,6 +179,10 @@ Status GraphOptions::Validate() const {
   FL_RETURN_IF_ERROR(Positive("graph.loop_max_residual_m", loop_max_residual_m));
   FL_RETURN_IF_ERROR(Positive("graph.loop_max_residual_rad", loop_max_residual_rad));
   if (max_iterations < 1) return Status::Error("graph.max_iterations must be >= 1");
+  if (!(function_tolerance >= 0.0 && function_tolerance < 1.0)) {
+    return Status::Error("graph.function_tolerance must be in [0, 1) (default 1e-6), got " +
+                         std::to_string(function_tolerance));
+  }
   FL_RETURN_IF_ERROR(NonNegative("graph.feedback_min_correction_m", feedback_min_correction_m));
   return Status::Ok();
 }

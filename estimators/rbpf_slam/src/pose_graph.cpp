@@ -86,7 +86,7 @@ double PoseGraph2D::Cost() {
   return cost;
 }
 
-double PoseGraph2D::Optimize(int max_iterations, bool* converged) {
+double PoseGraph2D::Optimize(int max_iterations, bool* converged, double function_tolerance) {
   if (nodes_.empty()) return 0.0;
   SyncProblem();
   ceres::Solver::Options opts;
@@ -96,6 +96,7 @@ double PoseGraph2D::Optimize(int max_iterations, bool* converged) {
   // (intel: the solves' share of the run fell from 33 % to 26 %, same results; BENCHMARKS.md).
   opts.sparse_linear_algebra_library_type = ceres::EIGEN_SPARSE;
   opts.max_num_iterations = max_iterations;
+  opts.function_tolerance = function_tolerance;
   opts.num_threads = 1;
   ceres::Solver::Summary summary;
   ceres::Solve(opts, problem_.get(), &summary);

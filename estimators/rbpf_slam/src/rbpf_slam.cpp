@@ -620,7 +620,7 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   // one and optimise again (from the original values).
   ++stats_.optimizations;
   for (int round = 0; round < 5; ++round) {
-    graph_.Optimize(g.max_iterations);
+    graph_.Optimize(g.max_iterations, nullptr, g.function_tolerance);
     int worst = -1;
     double worst_score = 1.0;
     for (int k = 0; k < graph_.num_edges(); ++k) {

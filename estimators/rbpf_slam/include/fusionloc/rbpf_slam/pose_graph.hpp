@@ -72,7 +72,9 @@ class PoseGraph2D {
   void AddEdge(const PoseGraphEdge& edge);
   // Levenberg-Marquardt with sparse Cholesky; node 0 is held fixed. Returns the final cost
   // (½ Σ squared whitened residuals); `converged` tells whether Ceres reported convergence.
-  double Optimize(int max_iterations, bool* converged = nullptr);
+  // It also stops when a step lowers the cost by less than `function_tolerance` of it.
+  double Optimize(int max_iterations, bool* converged = nullptr,
+                  double function_tolerance = 1e-6);
   // ½ Σ squared whitened (robustified) residuals of the enabled edges at the current poses.
   double Cost();
 
