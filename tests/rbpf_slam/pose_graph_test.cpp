@@ -36,23 +36,32 @@ TEST(RelativePose2Cost, ZeroAtTheMeasurement) {
   EXPECT_NEAR(Eigen::Vector3d(r[0], r[1], r[2]).norm(), 0.0, 1e-12);
 }
 
-TEST(PoseGraph2D, LoopClosureCorrectsDrift) {
-  // A square of 4 x 10 steps; odometry edges exact, initial values drifted in heading.
+// A square of 4 x 10 steps of 0.5 m with exact odometry edges and a loop closure (Huber 1) from
+// the last node to the first; the initial values drift by `drift_rad` of heading per step.
+PoseGraph2D SquareLoop(double drift_rad, std::vector<fl::Pose2>* truth) {
   PoseGraph2D g;
-  std::vector<fl::Pose2> truth;
+  truth->clear();
   fl::Pose2 p;
   for (int k = 0; k < 40; ++k) {
-    truth.push_back(p);
+    truth->push_back(p);
     p = p * fl::Pose2(0.5, 0, (k % 10 == 9) ? M_PI / 2 : 0.0);
   }
+  const std::vector<fl::Pose2>& t = *truth;
   fl::Pose2 drifted;
   for (int k = 0; k < 40; ++k) {
     g.AddNode(drifted);
-    if (k + 1 < 40) drifted = drifted * truth[k].between(truth[k + 1]) * fl::Pose2(0, 0, 0.01);
+    if (k + 1 < 40) drifted = drifted * t[k].between(t[k + 1]) * fl::Pose2(0, 0, drift_rad);
   }
   const Eigen::Matrix3d info = Eigen::Vector3d(1e4, 1e4, 1e4).asDiagonal();
-  for (int k = 0; k + 1 < 40; ++k) g.AddEdge({k, k + 1, truth[k].between(truth[k + 1]), info, 0.0});
-  g.AddEdge({39, 0, truth[39].between(truth[0]), info, 1.0});  // loop closure
+  for (int k = 0; k + 1 < 40; ++k) g.AddEdge({k, k + 1, t[k].between(t[k + 1]), info, 0.0});
+  g.AddEdge({39, 0, t[39].between(t[0]), info, 1.0});  // loop closure
+  return g;
+}
+
+TEST(PoseGraph2D, LoopClosureCorrectsDrift) {
+  std::vector<fl::Pose2> truth;
+  PoseGraph2D g = SquareLoop(0.01, &truth);
+  const Eigen::Matrix3d info = Eigen::Vector3d(1e4, 1e4, 1e4).asDiagonal();
   const double before = (g.pose(39).translation() - truth[39].translation()).norm();
   bool converged = false;
   g.Optimize(50, &converged);
@@ -67,25 +76,8 @@ TEST(PoseGraph2D, LoopClosureCorrectsDrift) {
 // A loose function tolerance stops the solve while steps still lower the cost by a few per cent:
 // its cost stays above the converged one, which the default tolerance reaches.
 TEST(PoseGraph2D, FunctionToleranceStopsEarly) {
-  auto make = [] {
-    PoseGraph2D g;
-    std::vector<fl::Pose2> truth;
-    fl::Pose2 p;
-    for (int k = 0; k < 40; ++k) {
-      truth.push_back(p);
-      p = p * fl::Pose2(0.5, 0, (k % 10 == 9) ? M_PI / 2 : 0.0);
-    }
-    fl::Pose2 drifted;
-    for (int k = 0; k < 40; ++k) {
-      g.AddNode(drifted);
-      if (k + 1 < 40) drifted = drifted * truth[k].between(truth[k + 1]) * fl::Pose2(0, 0, 0.05);
-    }
-    const Eigen::Matrix3d info = Eigen::Vector3d(1e4, 1e4, 1e4).asDiagonal();
-    for (int k = 0; k + 1 < 40; ++k) g.AddEdge({k, k + 1, truth[k].between(truth[k + 1]), info, 0.0});
-    g.AddEdge({39, 0, truth[39].between(truth[0]), info, 1.0});
-    return g;
-  };
-  PoseGraph2D tight = make(), loose = make();
+  std::vector<fl::Pose2> truth;
+  PoseGraph2D tight = SquareLoop(0.05, &truth), loose = SquareLoop(0.05, &truth);
   const double tight_cost = tight.Optimize(50);
   const double loose_cost = loose.Optimize(50, nullptr, 0.5);
   EXPECT_LT(tight_cost, 1e-12);
