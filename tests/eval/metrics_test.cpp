@@ -95,6 +95,31 @@ TEST(EvalAte, OffsetOnHalfThePointsGivesKnownStatistics) {
   EXPECT_LT(r.rot_deg.max, 1e-9);
 }
 
+TEST(EvalRunSpread, PairwiseAteOfRunsWithKnownOffsets) {
+  const Trajectory a = MakeHelixTrajectory(50);
+  // b: a moved rigidly (aligned away: 0 from a); c: a with every other position 0.1 m off in x
+  // (0.1/√2 from a and from b, as OffsetOnHalfThePointsGivesKnownStatistics without alignment;
+  // with se3 the alignment absorbs part of it).
+  const Trajectory b = TransformTrajectory(a, MakeTransform(0.1, -0.2, 0.7, {3, -1, 0.5}));
+  Trajectory c = a;
+  for (size_t i = 0; i < c.size(); i += 2) c[i].T_world_base.translation().x() += 0.1;
+  const double ac = ComputeAte(c, a, Alignment::kSE3, 1000).trans_m.rmse;
+  EXPECT_GT(ac, 0.03);
+  EXPECT_LE(ac, 0.1 / std::sqrt(2.0) + 1e-12);
+  const RunSpreadResult r = ComputeRunSpread({a, b, c}, Alignment::kSE3, 1000);
+  EXPECT_EQ(r.pairs, 3u);
+  EXPECT_NEAR(r.min_m, 0.0, 1e-9);  // a against b
+  EXPECT_NEAR(r.max_m, ac, 1e-9);   // a or b against c
+  EXPECT_NEAR(r.mean_m, 2.0 * ac / 3.0, 1e-9);
+  // Identical runs have no spread; one run is an error, as is a run that shares no time.
+  EXPECT_NEAR(ComputeRunSpread({a, a}, Alignment::kSE2, 1000).mean_m, 0.0, 1e-12);
+  EXPECT_NE(ErrorOf([&] { ComputeRunSpread({a}, Alignment::kSE2, 1000); }).find("at least 2"),
+            std::string::npos);
+  const Trajectory late = MakeHelixTrajectory(50, 100000000);
+  const std::string msg = ErrorOf([&] { ComputeRunSpread({a, late}, Alignment::kSE2, 1000); });
+  EXPECT_NE(msg.find("run 1 against run 0"), std::string::npos) << msg;
+}
+
 TEST(EvalAte, Se2RecoversPlanarTransformAndHeadingError) {
   const Trajectory ref = MakePlanarTrajectory(60, [](size_t i) {
     const double s = 0.1 * static_cast<double>(i);

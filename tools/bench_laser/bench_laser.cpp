@@ -369,8 +369,10 @@ int main(int argc, char** argv) {
       (fs::temp_directory_path() / ("fl_bench_laser_" + std::to_string(getpid()))).string();
   fs::create_directories(tmp);
   int failures = 0;
+  const fl::Utime max_dt = 20000;  // [us] estimate-reference (and run-run) time association
   for (const Input& in : inputs) {
     std::vector<fl::bench::Run> seed_runs;
+    std::vector<fl::eval::Trajectory> seed_trajectories;  // for the run-to-run spread
     for (const uint64_t seed : seeds) {
       const std::string run_name =
           seeds.size() > 1 ? in.name + "/s" + std::to_string(seed) : in.name;
@@ -410,7 +412,6 @@ int main(int argc, char** argv) {
         if (data.ground_truth.size() < 3)
           throw std::runtime_error("fewer than 3 ground-truth poses");
 
-        const fl::Utime max_dt = 20000;
         fl::rbpf::RbpfSlam slam(run_options);
         std::vector<double> ms_processed, ms_all, chi2_seq, chi2_loop;
         int64_t skipped = 0;
@@ -533,6 +534,7 @@ int main(int argc, char** argv) {
                      "from the reference (reference_refit.hpp)"
                    : "");
         seed_runs.push_back(run);
+        seed_trajectories.push_back(est);
         report.AddRun(run);
       } catch (const std::exception& e) {
         std::cerr << "fl-bench-laser: " << run_name << ": " << e.what() << "\n";
@@ -560,9 +562,16 @@ int main(int argc, char** argv) {
       std::sort(ates.begin(), ates.end());
       const size_t n = ates.size();
       const double median = n % 2 ? ates[n / 2] : 0.5 * (ates[n / 2 - 1] + ates[n / 2]);
+      // Reference-free repeatability: how far the seeds' trajectories are from each other.
+      const fl::eval::RunSpreadResult spread =
+          fl::eval::ComputeRunSpread(seed_trajectories, fl::eval::Alignment::kSE2, max_dt);
+      mean.Add("run_spread_m", spread.mean_m);
       mean.note = "mean of " + std::to_string(seed_runs.size()) + " runs (seeds " + seeds_text +
                   "); ATE per seed " + per_seed + " m, median " + Metres(median) + " m, worst " +
-                  Metres(ates.back()) + " m";
+                  Metres(ates.back()) + " m; run_spread_m = ATE of one run against another " +
+                  "(SE(2)-aligned, mean of " + std::to_string(spread.pairs) +
+                  (spread.pairs == 1 ? " pair, " : " pairs, ") + Metres(spread.min_m) + "-" +
+                  Metres(spread.max_m) + " m): the runs' own scatter, without the reference";
       report.AddRun(mean);
     }
   }

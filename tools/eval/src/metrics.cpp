@@ -6,6 +6,7 @@
 #include <cmath>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <numeric>
 #include <sstream>
 
@@ -223,6 +224,34 @@ AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment ali
   }
   r.trans_m = ComputeErrorStats(r.trans_errors_m);
   r.rot_deg = ComputeErrorStats(r.rot_errors_deg);
+  return r;
+}
+
+RunSpreadResult ComputeRunSpread(const std::vector<Trajectory>& runs, Alignment alignment,
+                                 Utime max_dt_us) {
+  if (runs.size() < 2) {
+    throw EvalError("run spread needs at least 2 runs of the same input, got " +
+                    std::to_string(runs.size()));
+  }
+  RunSpreadResult r;
+  r.min_m = std::numeric_limits<double>::infinity();
+  double sum = 0.0;
+  for (size_t a = 0; a < runs.size(); ++a) {
+    for (size_t b = a + 1; b < runs.size(); ++b) {
+      double ate = 0.0;
+      try {
+        ate = ComputeAte(runs[b], runs[a], alignment, max_dt_us).trans_m.rmse;
+      } catch (const EvalError& e) {
+        throw EvalError("run spread, run " + std::to_string(b) + " against run " +
+                        std::to_string(a) + ": " + e.what());
+      }
+      sum += ate;
+      r.min_m = std::min(r.min_m, ate);
+      r.max_m = std::max(r.max_m, ate);
+      ++r.pairs;
+    }
+  }
+  r.mean_m = sum / static_cast<double>(r.pairs);
   return r;
 }
 

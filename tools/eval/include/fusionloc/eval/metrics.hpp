@@ -46,6 +46,18 @@ struct AteResult {
 AteResult ComputeAte(const Trajectory& est, const Trajectory& ref, Alignment alignment,
                      fl::Utime max_dt_us);
 
+// Repeatability of a stochastic estimator without a reference: the ATE (translation RMSE after
+// `alignment`) of each run against each other run, over all pairs of runs of the same input
+// (e.g. particle-filter seeds). If the runs scatter independently with RMS σ about a common
+// trajectory, the mean is about √2 σ; an error against a reference well above it is shared by
+// the runs (the estimator's bias, or the reference's own error). Needs at least 2 runs.
+struct RunSpreadResult {
+  double mean_m = 0, min_m = 0, max_m = 0;  // over the pairs
+  size_t pairs = 0;
+};
+RunSpreadResult ComputeRunSpread(const std::vector<Trajectory>& runs, Alignment alignment,
+                                 fl::Utime max_dt_us);
+
 // The least-squares alignment alone, of point sets (columns), dst ≈ s R src + t.
 // SE2 rotates about z and translates in x, y only. Returns T (R, t) and sets *scale.
 Eigen::Isometry3d AlignPoints(const Eigen::Matrix3Xd& src, const Eigen::Matrix3Xd& dst,
