@@ -120,6 +120,46 @@ TEST(EvalRunSpread, PairwiseAteOfRunsWithKnownOffsets) {
   EXPECT_NE(msg.find("run 1 against run 0"), std::string::npos) << msg;
 }
 
+TEST(EvalAverageRuns, SymmetricScatterAveragesOutAndASharedErrorStays) {
+  const Trajectory truth = MakePlanarTrajectory(60, [](size_t i) {
+    const double s = 0.1 * static_cast<double>(i);
+    return Pose2(3.0 * std::sin(s), 2.0 * s, 0.3 * s);
+  });
+  // Every run shares a bend (0.2 m in y on the second half); runs 0 and 1 scatter about it in
+  // opposite directions (±0.15 m in x on every third pose, ±3 degrees of heading), run 2 does
+  // not, and each run is in its own frame.
+  Trajectory shared = truth;
+  for (size_t i = 30; i < shared.size(); ++i) shared[i].T_world_base.translation().y() += 0.2;
+  std::vector<Trajectory> runs;
+  for (const double sign : {1.0, -1.0, 0.0}) {
+    Trajectory run = shared;
+    for (size_t i = 0; i < run.size(); i += 3) {
+      run[i].T_world_base.translation().x() += sign * 0.15;
+      run[i].T_world_base.linear() =
+          run[i].T_world_base.linear() *
+          Eigen::AngleAxisd(sign * 3.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    }
+    runs.push_back(TransformTrajectory(run, Pose2(sign * 2.0, 1.0 - sign, sign).ToIsometry3()));
+  }
+  const Trajectory average = AverageRuns(runs, Alignment::kSE2, 1000);
+  ASSERT_EQ(average.size(), truth.size());
+  // The scatter cancels: the average is the shared trajectory (up to the second-order
+  // asymmetry of aligning +0.15 m and -0.15 m scatter onto run 0)...
+  const AteResult to_shared = ComputeAte(average, shared, Alignment::kSE2, 1000);
+  EXPECT_LT(to_shared.trans_m.rmse, 1e-4);
+  EXPECT_LT(to_shared.rot_deg.max, 0.01);
+  // ... so its error against the truth is the shared bend alone, below each scattered run's.
+  const double shared_ate = ComputeAte(shared, truth, Alignment::kSE2, 1000).trans_m.rmse;
+  EXPECT_GT(shared_ate, 0.05);
+  EXPECT_NEAR(ComputeAte(average, truth, Alignment::kSE2, 1000).trans_m.rmse, shared_ate, 1e-4);
+  EXPECT_GT(ComputeAte(runs[1], truth, Alignment::kSE2, 1000).trans_m.rmse, shared_ate + 0.01);
+  // Only time stamps every run has are averaged; no runs is an error.
+  runs[2].erase(runs[2].begin() + 10);
+  EXPECT_EQ(AverageRuns(runs, Alignment::kSE2, 1000).size(), truth.size() - 1);
+  EXPECT_NE(ErrorOf([] { AverageRuns({}, Alignment::kSE2, 1000); }).find("no runs"),
+            std::string::npos);
+}
+
 TEST(EvalAte, Se2RecoversPlanarTransformAndHeadingError) {
   const Trajectory ref = MakePlanarTrajectory(60, [](size_t i) {
     const double s = 0.1 * static_cast<double>(i);

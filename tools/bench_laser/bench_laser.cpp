@@ -373,6 +373,7 @@ int main(int argc, char** argv) {
   for (const Input& in : inputs) {
     std::vector<fl::bench::Run> seed_runs;
     std::vector<fl::eval::Trajectory> seed_trajectories;  // for the run-to-run spread
+    fl::eval::Trajectory reference;                       // the same for every seed
     for (const uint64_t seed : seeds) {
       const std::string run_name =
           seeds.size() > 1 ? in.name + "/s" + std::to_string(seed) : in.name;
@@ -535,6 +536,7 @@ int main(int argc, char** argv) {
                    : "");
         seed_runs.push_back(run);
         seed_trajectories.push_back(est);
+        if (reference.empty()) reference = data.ground_truth;
         report.AddRun(run);
       } catch (const std::exception& e) {
         std::cerr << "fl-bench-laser: " << run_name << ": " << e.what() << "\n";
@@ -566,12 +568,20 @@ int main(int argc, char** argv) {
       const fl::eval::RunSpreadResult spread =
           fl::eval::ComputeRunSpread(seed_trajectories, fl::eval::Alignment::kSE2, max_dt);
       mean.Add("run_spread_m", spread.mean_m);
+      // The error the runs share: ATE of their average trajectory (scatter averaged out).
+      const fl::eval::Trajectory average =
+          fl::eval::AverageRuns(seed_trajectories, fl::eval::Alignment::kSE2, max_dt);
+      mean.Add(
+          "shared_ate_m",
+          fl::eval::ComputeAte(average, reference, fl::eval::Alignment::kSE2, max_dt).trans_m.rmse);
       mean.note = "mean of " + std::to_string(seed_runs.size()) + " runs (seeds " + seeds_text +
                   "); ATE per seed " + per_seed + " m, median " + Metres(median) + " m, worst " +
                   Metres(ates.back()) + " m; run_spread_m = ATE of one run against another " +
                   "(SE(2)-aligned, mean of " + std::to_string(spread.pairs) +
                   (spread.pairs == 1 ? " pair, " : " pairs, ") + Metres(spread.min_m) + "-" +
-                  Metres(spread.max_m) + " m): the runs' own scatter, without the reference";
+                  Metres(spread.max_m) + " m): the runs' own scatter, without the reference" +
+                  "; shared_ate_m = ATE of the runs' average trajectory (each aligned onto the " +
+                  "first): the part of the error all runs share";
       report.AddRun(mean);
     }
   }

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iomanip>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <sstream>
 
@@ -253,6 +254,48 @@ RunSpreadResult ComputeRunSpread(const std::vector<Trajectory>& runs, Alignment 
   }
   r.mean_m = sum / static_cast<double>(r.pairs);
   return r;
+}
+
+Trajectory AverageRuns(const std::vector<Trajectory>& runs, Alignment alignment, Utime max_dt_us) {
+  if (runs.empty()) throw EvalError("average of runs: no runs");
+  const Trajectory& first = runs.front();
+  // Per time stamp of the first run: sums of the aligned positions and rotations, and how many
+  // runs have a pose there.
+  std::map<Utime, size_t> index;
+  for (size_t k = 0; k < first.size(); ++k) index.emplace(first[k].utime, k);
+  std::vector<Eigen::Vector3d> sum_p(first.size(), Eigen::Vector3d::Zero());
+  std::vector<Eigen::Matrix3d> sum_R(first.size(), Eigen::Matrix3d::Zero());
+  std::vector<size_t> count(first.size(), 0);
+  for (size_t r = 0; r < runs.size(); ++r) {
+    AteResult a;
+    try {
+      a = ComputeAte(runs[r], first, alignment, max_dt_us);
+    } catch (const EvalError& e) {
+      throw EvalError("average of runs, run " + std::to_string(r) + " against run 0: " + e.what());
+    }
+    for (size_t m = 0; m < a.ref_matched.size(); ++m) {
+      const size_t k = index.at(a.ref_matched[m].utime);
+      sum_p[k] += a.est_aligned[m].T_world_base.translation();
+      sum_R[k] += a.est_aligned[m].T_world_base.linear();
+      ++count[k];
+    }
+  }
+  Trajectory out;
+  for (size_t k = 0; k < first.size(); ++k) {
+    if (count[k] != runs.size()) continue;
+    // Chordal mean: the rotation nearest (Frobenius) to the summed matrices.
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum_R[k],
+                                                Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+    StampedPose p;
+    p.utime = first[k].utime;
+    p.T_world_base.linear() = svd.matrixU() * D * svd.matrixV().transpose();
+    p.T_world_base.translation() = sum_p[k] / static_cast<double>(runs.size());
+    out.push_back(p);
+  }
+  if (out.empty()) throw EvalError("average of runs: no time stamp of run 0 is in every run");
+  return out;
 }
 
 RpeResult ComputeRpe(const Trajectory& est, const Trajectory& ref, double delta, DeltaUnit unit,

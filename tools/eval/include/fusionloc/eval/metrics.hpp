@@ -57,6 +57,13 @@ struct RunSpreadResult {
 };
 RunSpreadResult ComputeRunSpread(const std::vector<Trajectory>& runs, Alignment alignment,
                                  fl::Utime max_dt_us);
+// The runs' average trajectory: every run aligned onto the first (as ComputeAte aligns est to
+// ref), then, at each time stamp of the first run that every run has (within max_dt_us), the
+// mean position and the chordal mean of the rotations. Its ATE against a reference is the
+// part of the error that the runs share; their scatter averages out (as 1/√n). Throws
+// EvalError if `runs` is empty or a run cannot be aligned.
+Trajectory AverageRuns(const std::vector<Trajectory>& runs, Alignment alignment,
+                       fl::Utime max_dt_us);
 
 // The least-squares alignment alone, of point sets (columns), dst ≈ s R src + t.
 // SE2 rotates about z and translates in x, y only. Returns T (R, t) and sets *scale.
