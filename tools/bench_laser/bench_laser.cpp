@@ -155,6 +155,22 @@ double FactorChi2(const fl::rbpf::KeyframeFactor& f, const fl::eval::Trajectory&
   return e.dot(f.information * e);
 }
 
+// A factor's translation projected on the reference's (both in frame i) and the reference's
+// length, for factors whose reference motion is at least 0.1 m; false otherwise. Summed over a
+// run, their ratio says whether the factors measure the motion short or long (a scale bias).
+bool FactorAlongTrack(const fl::rbpf::KeyframeFactor& f, const fl::eval::Trajectory& ref,
+                      fl::Utime max_dt, double* projected_m, double* reference_m) {
+  fl::Pose2 a, b;
+  if (!ReferenceAt(ref, f.utime_i, max_dt, &a) || !ReferenceAt(ref, f.utime_j, max_dt, &b))
+    return false;
+  const fl::Pose2 t = a.between(b);
+  const double length = std::hypot(t.x, t.y);
+  if (length < 0.1) return false;
+  *projected_m = (f.T_i_j.x * t.x + f.T_i_j.y * t.y) / length;
+  *reference_m = length;
+  return true;
+}
+
 // The reference refit (reference_refit.hpp) of a log's scans that have odometry and a reference
 // pose; odometry noise from `noise` (corrected logs: the model that generated it) or, without
 // it, the filter's motion model. Empty if fewer than 2 scans qualify.
@@ -415,6 +431,7 @@ int main(int argc, char** argv) {
 
         fl::rbpf::RbpfSlam slam(run_options);
         std::vector<double> ms_processed, ms_all, chi2_seq, chi2_loop;
+        double along_factor_m = 0.0, along_reference_m = 0.0;  // sequential factors
         int64_t skipped = 0;
         fl::bench::Progress progress("[bench laser] " + run_name,
                                      static_cast<int64_t>(data.scans.size()));
@@ -438,6 +455,12 @@ int main(int argc, char** argv) {
           for (const fl::rbpf::KeyframeFactor& f : r.factors) {
             const double c = FactorChi2(f, data.ground_truth, max_dt);
             if (c >= 0) (f.is_loop_closure ? chi2_loop : chi2_seq).push_back(c);
+            double projected = 0.0, length = 0.0;
+            if (!f.is_loop_closure &&
+                FactorAlongTrack(f, data.ground_truth, max_dt, &projected, &length)) {
+              along_factor_m += projected;
+              along_reference_m += length;
+            }
           }
           if (r.processed) ms_processed.push_back(ms);
           progress.Update(static_cast<int64_t>(i + 1));
@@ -497,6 +520,8 @@ int main(int argc, char** argv) {
             .Add("factor_chi2_median",
                  chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).median)
             .Add("factor_chi2_p95", chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).p95)
+            .Add("factor_length_ratio",
+                 along_reference_m > 0.0 ? along_factor_m / along_reference_m : -1.0)
             .Add("loop_factors", static_cast<double>(chi2_loop.size()))
             .Add("loop_chi2_median",
                  chi2_loop.empty() ? -1.0 : fl::bench::ComputeStats(chi2_loop).median)
@@ -529,7 +554,9 @@ int main(int argc, char** argv) {
             "png " + png + "; particles " + std::to_string(options.particles) +
             "; factor_chi2 = e^T Omega e of the sequential ICP factors against the reference "
             "(calibrated: median ~2.4), loop_chi2 the same for loop closures" +
-            "; ICP factors failed " + std::to_string(st.icp_failures) +
+            "; factor_length_ratio = the sequential factors' translations projected on the " +
+            "reference's, summed, over the reference's summed length (< 1: they measure the " +
+            "motion short)" + "; ICP factors failed " + std::to_string(st.icp_failures) +
             "; ms_per_item = every scan, ms_per_processed = scans the filter ran on" +
             (refit ? "; refit_ate_m = ATE of the data's own optimum (odometry + ICP edges) solved "
                      "from the reference (reference_refit.hpp)"
@@ -574,6 +601,9 @@ int main(int argc, char** argv) {
       mean.Add(
           "shared_ate_m",
           fl::eval::ComputeAte(average, reference, fl::eval::Alignment::kSE2, max_dt).trans_m.rmse);
+      // > 1: the runs' average is smaller than the reference (p_ref ≈ s R p_est + t).
+      mean.Add("shared_scale",
+               fl::eval::ComputeAte(average, reference, fl::eval::Alignment::kSim3, max_dt).scale);
       mean.note = "mean of " + std::to_string(seed_runs.size()) + " runs (seeds " + seeds_text +
                   "); ATE per seed " + per_seed + " m, median " + Metres(median) + " m, worst " +
                   Metres(ates.back()) + " m; run_spread_m = ATE of one run against another " +
@@ -581,7 +611,9 @@ int main(int argc, char** argv) {
                   (spread.pairs == 1 ? " pair, " : " pairs, ") + Metres(spread.min_m) + "-" +
                   Metres(spread.max_m) + " m): the runs' own scatter, without the reference" +
                   "; shared_ate_m = ATE of the runs' average trajectory (each aligned onto the " +
-                  "first): the part of the error all runs share";
+                  "first): the part of the error all runs share; shared_scale = the scale that " +
+                  "maps that average onto the reference (Sim(3) alignment; > 1: the estimate " +
+                  "is smaller)";
       report.AddRun(mean);
     }
   }
