@@ -29,6 +29,25 @@ TEST(Geometry, Pose2ComposeInverseBetween) {
   EXPECT_NEAR(back.theta, ab.theta, 1e-12);
 }
 
+TEST(Geometry, NearestRotation) {
+  const Eigen::Matrix3d r = RotationFromRollPitchYaw(0.1, -0.2, 2.5);
+  EXPECT_TRUE(NearestRotation(r).isApprox(r, 1e-12));
+  // A rotation printed with 4 digits comes back orthonormal and next to it.
+  const Eigen::Matrix3d printed = (r * 1e4).array().round().matrix() / 1e4;
+  const Eigen::Matrix3d fixed = NearestRotation(printed);
+  EXPECT_LT((fixed.transpose() * fixed - Eigen::Matrix3d::Identity()).norm(), 1e-12);
+  EXPECT_NEAR(fixed.determinant(), 1.0, 1e-12);
+  EXPECT_LT(RotationAngle(fixed.transpose() * r), 1e-3);
+  // The sum of two rotations about z by +-0.4 rad: their chordal mean is the rotation between.
+  const Eigen::Matrix3d sum =
+      r * Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()).toRotationMatrix() +
+      r * Eigen::AngleAxisd(-0.4, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  EXPECT_TRUE(NearestRotation(sum).isApprox(r, 1e-12));
+  // A reflection is not returned: the nearest proper rotation has det +1.
+  EXPECT_NEAR(NearestRotation(Eigen::Vector3d(1, 1, -1).asDiagonal().toDenseMatrix()).determinant(),
+              1.0, 1e-12);
+}
+
 TEST(Geometry, RollPitchYawRoundTrip) {
   const Eigen::Matrix3d r = RotationFromRollPitchYaw(0.1, -0.2, 2.5);
   const Eigen::Vector3d rpy = RollPitchYaw(r);

@@ -144,26 +144,19 @@ bool ReferenceAt(const fl::eval::Trajectory& ref, fl::Utime t, fl::Utime max_dt,
   return true;
 }
 
-// chi2 = eᵀ Ω e of a factor against the reference (-1 if the reference lacks a time).
-double FactorChi2(const fl::rbpf::KeyframeFactor& f, const fl::eval::Trajectory& ref,
-                  fl::Utime max_dt) {
-  fl::Pose2 a, b;
-  if (!ReferenceAt(ref, f.utime_i, max_dt, &a) || !ReferenceAt(ref, f.utime_j, max_dt, &b))
-    return -1;
-  const fl::Pose2 t = a.between(b);
+// chi2 = eᵀ Ω e of a factor against the reference relative pose T_i_j_reference.
+double FactorChi2(const fl::rbpf::KeyframeFactor& f, const fl::Pose2& T_i_j_reference) {
+  const fl::Pose2& t = T_i_j_reference;
   const Eigen::Vector3d e(f.T_i_j.x - t.x, f.T_i_j.y - t.y, fl::WrapAngle(f.T_i_j.theta - t.theta));
   return e.dot(f.information * e);
 }
 
-// A factor's translation projected on the reference's (both in frame i) and the reference's
-// length, for factors whose reference motion is at least 0.1 m; false otherwise. Summed over a
+// A factor's translation projected on the reference's, T_i_j_reference (both in frame i), and
+// the reference's length, for reference motions of at least 0.1 m; false otherwise. Summed over a
 // run, their ratio says whether the factors measure the motion short or long (a scale bias).
-bool FactorAlongTrack(const fl::rbpf::KeyframeFactor& f, const fl::eval::Trajectory& ref,
-                      fl::Utime max_dt, double* projected_m, double* reference_m) {
-  fl::Pose2 a, b;
-  if (!ReferenceAt(ref, f.utime_i, max_dt, &a) || !ReferenceAt(ref, f.utime_j, max_dt, &b))
-    return false;
-  const fl::Pose2 t = a.between(b);
+bool FactorAlongTrack(const fl::rbpf::KeyframeFactor& f, const fl::Pose2& T_i_j_reference,
+                      double* projected_m, double* reference_m) {
+  const fl::Pose2& t = T_i_j_reference;
   const double length = std::hypot(t.x, t.y);
   if (length < 0.1) return false;
   *projected_m = (f.T_i_j.x * t.x + f.T_i_j.y * t.y) / length;
@@ -453,11 +446,15 @@ int main(int argc, char** argv) {
           }
           ms_all.push_back(ms);
           for (const fl::rbpf::KeyframeFactor& f : r.factors) {
-            const double c = FactorChi2(f, data.ground_truth, max_dt);
-            if (c >= 0) (f.is_loop_closure ? chi2_loop : chi2_seq).push_back(c);
+            fl::Pose2 a, b;
+            if (!ReferenceAt(data.ground_truth, f.utime_i, max_dt, &a) ||
+                !ReferenceAt(data.ground_truth, f.utime_j, max_dt, &b)) {
+              continue;
+            }
+            const fl::Pose2 T_i_j_reference = a.between(b);
+            (f.is_loop_closure ? chi2_loop : chi2_seq).push_back(FactorChi2(f, T_i_j_reference));
             double projected = 0.0, length = 0.0;
-            if (!f.is_loop_closure &&
-                FactorAlongTrack(f, data.ground_truth, max_dt, &projected, &length)) {
+            if (!f.is_loop_closure && FactorAlongTrack(f, T_i_j_reference, &projected, &length)) {
               along_factor_m += projected;
               along_reference_m += length;
             }

@@ -283,14 +283,9 @@ Trajectory AverageRuns(const std::vector<Trajectory>& runs, Alignment alignment,
   Trajectory out;
   for (size_t k = 0; k < first.size(); ++k) {
     if (count[k] != runs.size()) continue;
-    // Chordal mean: the rotation nearest (Frobenius) to the summed matrices.
-    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum_R[k],
-                                                Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
-    D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
     StampedPose p;
     p.utime = first[k].utime;
-    p.T_world_base.linear() = svd.matrixU() * D * svd.matrixV().transpose();
+    p.T_world_base.linear() = NearestRotation(sum_R[k]);  // chordal mean
     p.T_world_base.translation() = sum_p[k] / static_cast<double>(runs.size());
     out.push_back(p);
   }

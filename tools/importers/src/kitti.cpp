@@ -182,8 +182,7 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m, const std::string& wha
       m.determinant() < 0.0) {
     Fail(what + ": the 3x3 part is not a rotation (R^T R != I or det < 0)");
   }
-  Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  return svd.matrixU() * svd.matrixV().transpose();
+  return fl::NearestRotation(m);
 }
 
 std::vector<Eigen::Isometry3d> ReadPoses(const std::string& path) {
@@ -575,7 +574,7 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
     summary.warnings.push_back("no ground truth: GROUND_TRUTH not written");
   } else if (fs::path(seq.poses_path).filename() == "oxts") {
     summary.notes.push_back("ground truth computed from " + seq.poses_path +
-                               " (KITTI devkit OXTS-to-pose method; no pose file given)");
+                            " (KITTI devkit OXTS-to-pose method; no pose file given)");
   }
 
   LcmLogWriter writer(out_log);

@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <cmath>
 
 namespace fl {
@@ -110,6 +111,16 @@ inline Eigen::Matrix3d RotationFromRollPitchYaw(double roll, double pitch, doubl
           Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
           Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
       .toRotationMatrix();
+}
+
+// The rotation nearest to a 3x3 matrix in the Frobenius norm (the rotation factor of its polar
+// decomposition, det +1): U diag(1, 1, det(U Vᵀ)) Vᵀ from m = U S Vᵀ. It re-orthonormalises a
+// rotation printed with few digits and gives the chordal mean of rotations from their sum.
+inline Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m) {
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  return svd.matrixU() * d * svd.matrixV().transpose();
 }
 
 // Angle of a rotation matrix (geodesic distance to identity), in radians.
