@@ -2,7 +2,7 @@
 #include <fstream>
 #include <iostream>
 
-#include "fusionloc/common/command_line.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/procman/launch.hpp"
@@ -32,13 +32,14 @@ bool ParseVars(const std::string& text, std::map<std::string, std::string>* vars
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::CommandLine cli(
+  fl::Program program(
       "fl-procman",
       "Starts the processes of a launch file, restarts them by their policy (never, "
       "on_failure, always; max_restarts), writes each one's output to LOG_DIR/<name>.log and "
       "stops them all cleanly (SIGTERM, then SIGKILL) when the run ends: a process marked "
       "on_exit: stop_all exits, a required process fails for good, or Ctrl-C. Exit status: 0 "
       "the run ended cleanly, 1 it failed, 2 bad usage or launch file.");
+  fl::CommandLine& cli = program.cli();
   std::string launch_path, log_dir = "out/procman", vars_text, report_path;
   double status_period_s = 10.0;
   cli.AddPositional("LAUNCH", &launch_path, "launch file (YAML), e.g. config/launch/sim_demo.yaml");
@@ -51,7 +52,7 @@ int main(int argc, char** argv) {
   cli.AddEpilog(
       "\nExample:\n  fl-procman config/launch/sim_demo.yaml --log-dir out/demo/run1 \\\n"
       "      --vars BIN=build/bin,LCM_URL=udpm://239.255.76.67:7667?ttl=0\n");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
   std::map<std::string, std::string> vars;
   std::string error;
   if (!ParseVars(vars_text, &vars, &error)) {
@@ -75,8 +76,8 @@ int main(int argc, char** argv) {
     fl::procman::Supervisor supervisor(launch, options);
     const fl::procman::RunResult result = supervisor.Run();
     const std::string table = supervisor.ReportTable();
-    std::cout << "[procman " << launch.name << "] run " << (result.ok ? "ended" : "FAILED")
-              << ": " << result.reason << "\n"
+    std::cout << "[procman " << launch.name << "] run " << (result.ok ? "ended" : "FAILED") << ": "
+              << result.reason << "\n"
               << table;
     if (!report_path.empty()) {
       std::ofstream out(report_path);

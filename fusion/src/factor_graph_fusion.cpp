@@ -132,12 +132,13 @@ Status FusionOptions::Validate() const {
   return Status::Ok();
 }
 
-std::string SolveSummary::ToString() const {
+std::string SolveSummary::ToString(bool with_time) const {
   if (!ran) return "no solve yet";
   std::ostringstream s;
   s << (full ? "full" : "window") << ": " << termination << ", iterations " << iterations
     << ", cost " << initial_cost << " -> " << final_cost << ", " << num_nodes << " nodes, "
-    << num_factors << " factors, " << time_ms << " ms";
+    << num_factors << " factors";
+  if (with_time) s << ", " << time_ms << " ms";
   return s.str();
 }
 
@@ -251,9 +252,9 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     prior.cost.reset(Se2PriorCost::Create(node.state, sqrt_info));
     AddGraphFactor(std::move(prior));
   }
-  if (index > 0 && (options_.laser_chain_factors == "always" ||
-                    (options_.laser_chain_factors == "odometry_gaps" &&
-                     !options_.use_wheel_odometry))) {
+  if (index > 0 &&
+      (options_.laser_chain_factors == "always" ||
+       (options_.laser_chain_factors == "odometry_gaps" && !options_.use_wheel_odometry))) {
     AddChainFactor(index);
   }
   AttachPendingFactors();
@@ -396,8 +397,8 @@ void FactorGraphFusion::AddChainFactor(int j) {
   const Pose2 motion = prev.T_map_base_rbpf.between(nodes_[j].T_map_base_rbpf);
   const double dist = std::hypot(motion.x, motion.y);
   const double sxy = options_.chain_sigma_xy_min + options_.chain_sigma_xy_per_m * dist;
-  const double sth = options_.chain_sigma_theta_min +
-                     options_.chain_sigma_theta_per_rad * std::fabs(motion.theta);
+  const double sth =
+      options_.chain_sigma_theta_min + options_.chain_sigma_theta_per_rad * std::fabs(motion.theta);
   ++counters_.chain_factors;
   AddSequentialFactor(j, motion, sxy, sth, FactorSource::kLaser, robust_loss_);
 }

@@ -69,7 +69,7 @@ bool ExpandVariables(const std::string& text, const std::map<std::string, std::s
     } else if (const char* env = std::getenv(name.c_str()); env != nullptr) {
       result += env;
     } else {
-      *error = "variable ${" + name + "} is not set; pass --var " + name +
+      *error = "variable ${" + name + "} is not set; pass --vars " + name +
                "=VALUE to fl-procman or export it";
       return false;
     }
@@ -79,8 +79,7 @@ bool ExpandVariables(const std::string& text, const std::map<std::string, std::s
   return true;
 }
 
-bool SplitCommand(const std::string& command, std::vector<std::string>* argv,
-                  std::string* error) {
+bool SplitCommand(const std::string& command, std::vector<std::string>* argv, std::string* error) {
   argv->clear();
   std::string word;
   bool in_word = false, quoted = false;

@@ -2,10 +2,13 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 
 namespace fl::test {
@@ -32,6 +35,31 @@ class TempDir {
  private:
   std::string path_;
 };
+
+// What a shell command did: its exit status (-1 if killed by a signal), stdout and stderr.
+struct CommandResult {
+  int status = -1;
+  std::string out, err;
+};
+
+// Runs `command` with sh in `dir`, capturing stdout and stderr.
+inline CommandResult RunCommand(const std::string& command, const TempDir& dir) {
+  const std::string out = dir.file("cmd_stdout.txt"), err = dir.file("cmd_stderr.txt");
+  const std::string cmd =
+      "cd '" + dir.path() + "' && " + command + " > '" + out + "' 2> '" + err + "' < /dev/null";
+  const int raw = std::system(cmd.c_str());
+  CommandResult r;
+  r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  auto slurp = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+  };
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
 
 // Skips the test (with the reason) when shared data is not present.
 #define FL_REQUIRE_SHARED_FILE(path)                                                       \

@@ -33,13 +33,14 @@ TEST(SimMainTest, HelpListsFlagsAndChannels) {
   }
 }
 
+// Exit codes: 2 for a bad option value or options file (README "Exit codes").
 TEST(SimMainTest, BadInputGivesClearErrors) {
   std::string out;
-  EXPECT_EQ(RunCommand(kSim + " --world office --log /dev/null", &out), 1);
+  EXPECT_EQ(RunCommand(kSim + " --world office --log /dev/null", &out), 2);
   EXPECT_NE(out.find("'paper' or 'corridor'"), std::string::npos) << out;
   EXPECT_EQ(RunCommand(kSim + " --duration -3 --seed -7 --log x", &out), 2);
   EXPECT_NE(out.find("seed"), std::string::npos) << out;
-  EXPECT_EQ(RunCommand(kSim + " --config /nonexistent/sim.yaml", &out), 1);
+  EXPECT_EQ(RunCommand(kSim + " --config /nonexistent/sim.yaml", &out), 2);
   EXPECT_NE(out.find("/nonexistent/sim.yaml"), std::string::npos) << out;
   EXPECT_EQ(RunCommand(kSim + " --rate -1", &out), 2);
   EXPECT_NE(out.find("--rate"), std::string::npos) << out;
@@ -50,8 +51,8 @@ TEST(SimMainTest, WritesALogFromAConfigFile) {
   std::string out;
   const std::string log = dir.file("sim.lcmlog");
   ASSERT_EQ(RunCommand(kSim + " --config " + fl::test::SourceDir() +
-                    "/config/sim_corridor.yaml --duration 0.5 --log " + log,
-                &out),
+                           "/config/sim_corridor.yaml --duration 0.5 --log " + log,
+                       &out),
             0)
       << out;
   fl::LcmLogReader reader(log);

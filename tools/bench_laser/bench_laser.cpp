@@ -28,16 +28,16 @@
 #include "bot_core/pose_t.hpp"
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/channels.hpp"
-#include "fusionloc/common/command_line.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/importers/carmen.hpp"
 #include "fusionloc/rbpf_slam/odometry_buffer.hpp"
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
-#include "fusionloc/rbpf_slam/reference_refit.hpp"
 #include "fusionloc/sim/simulator.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
+#include "reference_refit.hpp"
 
 namespace fs = std::filesystem;
 
@@ -240,7 +240,7 @@ LogData SimulateWorld(fl::sim::SimOptions so, fl::Pose2* T_base_laser) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::CommandLine cli(
+  fl::Program program(
       "fl-bench-laser",
       "Runs the laser RBPF-SLAM on the CARMEN logs of DATA/laser (raw mit-csail.clf "
       "against csail-corrected.log.gz; every *-corrected log with the importer's "
@@ -248,6 +248,7 @@ int main(int argc, char** argv) {
       "(.clf, .log, .log.gz) likewise) and reports ATE (SE(2)-aligned), RPE over "
       "consecutive scans, ms per scan (AddScan only, one core) and peak memory, "
       "and writes a PNG of each map with both trajectories.");
+  fl::CommandLine& cli = program.cli();
   fl::bench::CommonArgs args;
   fl::bench::AddCommonFlags(&cli, &args, "laser");
   std::string config;
@@ -288,7 +289,7 @@ int main(int argc, char** argv) {
   bool dump = false;
   cli.AddFlag("dump", &dump,
               "also write the estimate and reference trajectories (TUM) next to the PNGs");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
   if (const fl::Status s = refit_options.Validate(); !s.ok()) {
     std::cerr << "fl-bench-laser: --refit-pairs: " << s.message() << "\n";
     return 2;

@@ -9,7 +9,7 @@
 #include <sstream>
 
 #include "fusionloc/bench/bench.hpp"
-#include "fusionloc/common/command_line.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/fusion/pose_graph.hpp"
 
 namespace {
@@ -32,11 +32,12 @@ const std::map<std::string, Reference>& References() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::CommandLine cli("fl-bench-posegraph",
+  fl::Program program("fl-bench-posegraph",
                       "Optimises every g2o pose graph (VERTEX_SE2/EDGE_SE2, VERTEX_SE3:QUAT/"
                       "EDGE_SE3:QUAT) in DATA/posegraph/ with the fusion back-end (LM, "
                       "SPARSE_NORMAL_CHOLESKY, max 100 iterations, first pose fixed) and "
                       "compares the final cost (1/2 sum |r|^2) with Ceres' example references.");
+  fl::CommandLine& cli = program.cli();
   fl::bench::CommonArgs args;
   fl::bench::AddCommonFlags(&cli, &args, "posegraph");
   int repeats = 3;
@@ -50,7 +51,7 @@ int main(int argc, char** argv) {
   cli.AddFlag("repeats", &repeats, "solves per graph; the median solve time is reported");
   cli.AddFlag("threads", &threads, "Ceres threads (1 = fair single-core time)");
   cli.AddFlag("only", &only, "run only graphs whose file name contains this text");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
   if (repeats < 1 || threads < 1) {
     std::cerr << "fl-bench-posegraph: --repeats and --threads must be >= 1\n";
     return 2;

@@ -19,7 +19,7 @@
 #include <sstream>
 
 #include "fusionloc/bench/bench.hpp"
-#include "fusionloc/common/command_line.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/eval/plot.hpp"
@@ -170,11 +170,12 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::CommandLine cli(
+  fl::Program program(
       "fl-bench-sim",
       "RBPF-SLAM alone, stereo VO alone and the factor-graph fusion on the simulated worlds "
       "(paper, corridor): ATE position/heading RMSE against ground truth, time per incremental "
       "update, and a PNG of x/y/heading error over time per world (MSIF Fig. 6).");
+  fl::CommandLine& cli = program.cli();
   fl::bench::CommonArgs args;
   fl::bench::AddCommonFlags(&cli, &args, "sim");
   std::string worlds = "paper,corridor";
@@ -188,7 +189,7 @@ int main(int argc, char** argv) {
               "fusion YAML (FusionProcessConfig, e.g. config/fusion.yaml); default: built-in");
   cli.AddFlag("png-dir", &png_dir, "where to write fusion_<world>_errors.png");
   cli.AddFlag("duration", &duration_s, "override the simulated duration [s] (0: the world's)");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
 
   ff::FusionOptions fopts;
   try {

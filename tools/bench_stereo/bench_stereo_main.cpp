@@ -18,10 +18,10 @@
 
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/channels.hpp"
-#include "fusionloc/common/command_line.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/importers/kitti.hpp"
@@ -225,17 +225,15 @@ RunOutput RunFolder(const std::string& folder, const fl::vo::StereoVoOptions& op
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::SetLogProcessName("fl-bench-stereo");
-  fl::CommandLine cli("fl-bench-stereo",
+  fl::Program program("fl-bench-stereo",
                       "Stereo VO benchmark on KITTI-format folders (raw drive or odometry "
                       "sequence with poses): KITTI segment drift, per-frame relative error, "
                       "end-point error, time per frame on one thread, trajectory PNG.");
+  fl::CommandLine& cli = program.cli();
   fl::bench::CommonArgs args;
   fl::bench::AddCommonFlags(&cli, &args, "stereo");
   std::string folders, config, png_dir = "out/bench";
   int threads = 1;
-  std::string log_level = "info";
-  cli.AddFlag("log-level", &log_level, "debug (per-frame statistics), info, warn or error");
   cli.AddFlag("folders", &folders,
               "comma-separated KITTI folders (default: DATA/stereo/kitti_raw_2011_09_26_drive_0001,"
               " or DATA itself if it is a KITTI folder)");
@@ -243,13 +241,7 @@ int main(int argc, char** argv) {
   cli.AddFlag("png-dir", &png_dir, "folder for the trajectory PNGs");
   cli.AddFlag("threads", &threads, "OpenCV threads (1 = the single-core number)");
   cli.AddEpilog("\nExample: ./fusionloc bench stereo --data ../shared/data\n");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
-  fl::LogLevel level;
-  if (!fl::ParseLogLevel(log_level, &level)) {
-    std::cerr << "fl-bench-stereo: unknown --log-level '" << log_level << "'\n";
-    return 2;
-  }
-  fl::SetLogLevel(level);
+  if (!program.Parse(argc, argv)) return program.exit_code();
   try {
     cv::setNumThreads(threads);
     fl::vo::StereoVoOptions options;

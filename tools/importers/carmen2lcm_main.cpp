@@ -4,8 +4,8 @@
 #include <filesystem>
 #include <iostream>
 
-#include "fusionloc/common/command_line.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/importers/carmen.hpp"
 
@@ -26,19 +26,19 @@ std::string DefaultOutput(const std::string& in) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::SetLogProcessName("fl-carmen2lcm");
-  fl::CommandLine cli("fl-carmen2lcm",
+  fl::Program program("fl-carmen2lcm",
                       "Converts a CARMEN laser log (.clf, .log, .log.gz) into an LCM log:\n"
                       "LASER (planar_lidar_t), ODOMETRY (wheel_odometry_t) and, for corrected\n"
                       "logs, GROUND_TRUTH (pose_t, the corrected poses). Corrected logs get\n"
                       "seeded synthetic noisy odometry (see docs/IMPORTERS.md).");
-  std::string in, out, config, noisy, timestamp, timestamps_from, ground_truth_from;
+  fl::CommandLine& cli = program.cli();
+  std::string in, out, noisy, timestamp, timestamps_from, ground_truth_from;
   int64_t seed = -1;
-  bool print_config = false;
+  fl::importers::CarmenOptions options;
+  program.AddOptions(&options, "a CarmenOptions file, see docs/IMPORTERS.md");
   cli.AddPositional("IN", &in, "CARMEN log to read", /*required=*/false);
   cli.AddPositional("OUT", &out, "LCM log to write (default: IN's name with .lcmlog, here)",
                     /*required=*/false);
-  cli.AddFlag("config", &config, "YAML file with CarmenOptions (e.g. config/carmen2lcm.yaml)");
   cli.AddFlag("noisy-odometry", &noisy,
               "auto (corrected logs by file name), true or false (overrides the config)");
   cli.AddFlag("seed", &seed, "seed of the odometry noise (overrides the config; -1 = config)");
@@ -49,7 +49,6 @@ int main(int argc, char** argv) {
   cli.AddFlag("ground-truth-from", &ground_truth_from,
               "raw logs: corrected log of the same run; its poses go to GROUND_TRUTH for the "
               "raw scans with the same ranges (e.g. csail-corrected.log.gz for mit-csail.clf)");
-  cli.AddFlag("print-config", &print_config, "print the options as YAML and exit");
   cli.AddEpilog(
       "\nExamples:\n"
       "  fl-carmen2lcm ../shared/data/laser/mit-csail.clf csail-raw.lcmlog\n"
@@ -60,37 +59,21 @@ int main(int argc, char** argv) {
       "      --ground-truth-from ../shared/data/laser/csail-corrected.log.gz\n"
       "Exit status: 0 done, 1 conversion failed (nothing written), 2 usage or\n"
       "configuration error.\n");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
-  try {
-    fl::importers::CarmenOptions options;
-    if (!config.empty()) options = fl::LoadYamlFile<fl::importers::CarmenOptions>(config);
+  cli.AddCheck([&]() -> std::string {  // the flags override the options file
     if (!noisy.empty()) options.noisy_odometry = noisy;
     if (seed >= 0) options.seed = static_cast<uint64_t>(seed);
     if (!timestamp.empty()) options.timestamp = timestamp;
     if (!timestamps_from.empty()) options.timestamps_from = timestamps_from;
     if (!ground_truth_from.empty()) options.ground_truth_from = ground_truth_from;
     const fl::Status valid = options.Validate();
-    if (!valid.ok()) {
-      std::cerr << "fl-carmen2lcm: invalid options: " << valid.message() << "\n";
-      return 2;
-    }
-    if (print_config) {
-      std::cout << fl::SaveYamlString(options);
-      return 0;
-    }
-    if (in.empty()) {
-      std::cerr << "fl-carmen2lcm: missing IN (the CARMEN log to convert); see --help\n";
-      return 2;
-    }
+    return valid.ok() ? "" : "invalid options: " + valid.message();
+  });
+  if (!program.Parse(argc, argv)) return program.exit_code();
+  return program.Run([&] {
+    if (in.empty()) throw fl::UsageError("missing IN (the CARMEN log to convert)");
     if (out.empty()) out = DefaultOutput(in);
     const auto summary = fl::importers::ConvertCarmen(options, in, out);
     std::cout << summary.ToString();
-    return 0;
-  } catch (const fl::ConfigError& e) {
-    std::cerr << "fl-carmen2lcm: invalid configuration: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "fl-carmen2lcm: error: " << e.what() << "\n";
-    return 1;
-  }
+    return fl::kExitOk;
+  });
 }

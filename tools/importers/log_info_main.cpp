@@ -3,18 +3,18 @@
 #include <exception>
 #include <iostream>
 
-#include "fusionloc/common/command_line.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/importers/log_info.hpp"
 
 int main(int argc, char** argv) {
-  fl::SetLogProcessName("fl-log-info");
-  fl::CommandLine cli("fl-log-info",
+  fl::Program program("fl-log-info",
                       "Summarises an LCM log: per channel the message type (by fingerprint,\n"
                       "matched against every fusionloc/bot_core type; others show as\n"
                       "'unknown (0x...)'), count, rate, bytes, first/last time, messages that do\n"
                       "not decode as their type and time going backwards; plus the log's time\n"
                       "span and any truncated or corrupt bytes.");
+  fl::CommandLine& cli = program.cli();
   std::string path;
   bool json = false, strict = false, types = false;
   cli.AddPositional("LOG", &path, "LCM log file", /*required=*/false);
@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
       "Exit status: 0 read (problems are listed), 1 cannot read or not an LCM log,\n"
       "2 usage error, "
       "3 problems found (with --strict).\n");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
   if (types) {
     for (const auto& t : fl::importers::KnownLcmTypes()) {
       std::printf("0x%016llx  %s\n", static_cast<unsigned long long>(t.fingerprint),

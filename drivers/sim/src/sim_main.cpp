@@ -6,9 +6,9 @@
 #include <stdexcept>
 #include <thread>
 
-#include "fusionloc/common/command_line.hpp"
-#include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/common/status_reporter.hpp"
 #include "fusionloc/common/yaml_options.hpp"
@@ -18,15 +18,15 @@
 
 namespace {
 
-int RunLive(const fl::sim::SimOptions& options, const std::string& url, double rate) {
-  auto lcm = fl::MakeLcm(url);
-  fl::InstallShutdownHandlers();
+int RunLive(const fl::sim::SimOptions& options, const fl::LcmProcess& process, double rate) {
+  auto lcm = process.Open();
+  const fl::ChannelMap& channels = process.channels();
   fl::StatusReporter status(lcm.get(), "fl-sim");
   fl::sim::Simulator sim(options);
   const int8_t ok = fusionloc::status_t::LEVEL_OK;
   status.SetState(ok, "publishing world '" + options.world.name + "'");
-  FL_LOG(INFO) << "world '" << options.world.name << "', " << sim.total_frames()
-               << " steps of " << options.step_s << " s, rate " << rate << "x, on " << url;
+  FL_LOG(INFO) << "world '" << options.world.name << "', " << sim.total_frames() << " steps of "
+               << options.step_s << " s, rate " << rate << "x, on " << lcm->url();
   const auto wall_start = std::chrono::steady_clock::now();
   fl::sim::SimFrame frame;
   int64_t frames = 0;
@@ -50,13 +50,12 @@ int RunLive(const fl::sim::SimOptions& options, const std::string& url, double r
     }
     const auto t0 = std::chrono::steady_clock::now();
     fl::sim::VisitMessages(frame, [&](const char* channel, const auto& msg) {
-      lcm->Publish(channel, msg, frame.utime);
+      lcm->Publish(channels(channel), msg, frame.utime);
       status.CountOut();
     });
     ++frames;
-    status.AddItemTime(std::chrono::duration<double, std::milli>(
-                           std::chrono::steady_clock::now() - t0)
-                           .count());
+    status.AddItemTime(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     status.Set("sim_time_s", static_cast<double>(frame.step) * options.step_s);
     status.Set("route_x_m", frame.T_world_base.x);
     status.Set("route_y_m", frame.T_world_base.y);
@@ -64,8 +63,7 @@ int RunLive(const fl::sim::SimOptions& options, const std::string& url, double r
   }
   status.SetState(ok, fl::ShutdownRequested() ? "stopped" : "finished");
   status.Tick(true);
-  FL_LOG(INFO) << "published " << frames << " steps (" << lcm->messages_published()
-               << " messages)";
+  FL_LOG(INFO) << "published " << frames << " steps (" << lcm->messages_published() << " messages)";
   return 0;
 }
 
@@ -86,83 +84,81 @@ int RunLog(const fl::sim::SimOptions& options, const std::string& path) {
                      << (100 * done / std::max<int64_t>(total, 1)) << "%), eta "
                      << static_cast<int>(eta + 0.5) << " s";
       });
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   FL_LOG(INFO) << "wrote " << path << ": " << stats.frames << " steps, " << stats.events
-               << " messages, " << stats.bytes / 1e6 << " MB of payload in " << wall
-               << " s (" << options.duration_s / std::max(wall, 1e-9) << "x real time)";
+               << " messages, " << stats.bytes / 1e6 << " MB of payload in " << wall << " s ("
+               << options.duration_s / std::max(wall, 1e-9) << "x real time)";
   return 0;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::SetLogProcessName("fl-sim");
-  fl::CommandLine cli("fl-sim",
+  fl::Program program("fl-sim",
                       "Simulated differential-drive robot with a planar laser, a stereo camera and "
                       "wheel odometry, in a ray-cast textured world. Publishes live over LCM, or "
                       "writes an LCM log (--log) as fast as it can. Same options and seed give a "
                       "byte-identical log.");
-  std::string config, world, log_path, top_view;
-  std::string url = fl::kDefaultLcmUrl;
+  fl::CommandLine& cli = program.cli();
+  fl::sim::SimOptions options;
+  program.AddOptions(&options, "config/sim_paper.yaml; the flags below override it");
+  std::string world, log_path, top_view;
   int64_t seed = -1;
   double duration = -1.0, rate = 1.0;
   double snapshot_time = -1.0;
   std::string snapshot;
-  bool print_config = false;
-  cli.AddFlag("config", &config, "YAML options file (e.g. config/sim_paper.yaml); flags below "
-                                 "override it");
   cli.AddFlag("world", &world, "world: paper | corridor (default: the config's, else paper)");
-  cli.AddFlag("seed", &seed, "random seed for the world layout and all noise (>= 0; -1 = the config's, else 1)");
-  cli.AddFlag("duration", &duration, "simulated seconds (-1 = the config's, else 100 paper, 240 corridor)");
+  cli.AddFlag("seed", &seed,
+              "random seed for the world layout and all noise (>= 0; -1 = the config's, else 1)");
+  cli.AddFlag("duration", &duration,
+              "simulated seconds (-1 = the config's, else 100 paper, 240 corridor)");
   cli.AddFlag("log", &log_path, "write an LCM log to this file instead of publishing live");
-  cli.AddFlag("lcm-url", &url, "LCM URL to publish on (live mode)");
-  cli.AddFlag("rate", &rate, "live pace: 1 = real time, 2 = twice as fast, 0 = as fast as possible");
-  cli.AddFlag("top-view", &top_view, "write a PNG top view of the world, route and driven "
-                                     "trajectory to this file and exit");
-  cli.AddFlag("snapshot", &snapshot, "write the stereo pair at --snapshot-time as "
-                                     "PREFIX_left.png / PREFIX_right.png and exit");
+  cli.AddFlag("rate", &rate,
+              "live pace: 1 = real time, 2 = twice as fast, 0 = as fast as possible");
+  cli.AddFlag("top-view", &top_view,
+              "write a PNG top view of the world, route and driven "
+              "trajectory to this file and exit");
+  cli.AddFlag("snapshot", &snapshot,
+              "write the stereo pair at --snapshot-time as "
+              "PREFIX_left.png / PREFIX_right.png and exit");
   cli.AddFlag("snapshot-time", &snapshot_time, "simulated time of --snapshot [s]");
-  cli.AddFlag("print-config", &print_config, "print the effective options as YAML and exit");
+  fl::LcmProcess process(
+      &program, {},
+      {{"STEREO_CALIBRATION", "fusionloc.stereo_calibration_t", "first and every 1 s"},
+       {"GROUND_TRUTH", "bot_core.pose_t", "true T_world_base, 10 Hz"},
+       {"ODOMETRY", "fusionloc.wheel_odometry_t", "10 Hz"},
+       {"LASER", "bot_core.planar_lidar_t", "10 Hz, range 0 = no return"},
+       {"STEREO", "bot_core.images_t", "LEFT+RIGHT gray 640x480, 2 Hz"}});
   cli.AddEpilog(
-      "\nChannels: STEREO_CALIBRATION (fusionloc.stereo_calibration_t, first and every 1 s),\n"
-      "GROUND_TRUTH (bot_core.pose_t, 10 Hz), ODOMETRY (fusionloc.wheel_odometry_t, 10 Hz),\n"
-      "LASER (bot_core.planar_lidar_t, 10 Hz, range 0 = no return), STEREO (bot_core.images_t\n"
-      "LEFT+RIGHT gray 640x480, 2 Hz).\n"
-      "Examples:\n"
+      "\nExamples:\n"
       "  fl-sim --log paper.lcmlog                       # 100 s paper world, seed 1\n"
       "  fl-sim --world corridor --seed 3 --log c.lcmlog\n"
       "  fl-sim --config config/sim_paper.yaml           # live, real time\n"
       "See docs/SIMULATOR.md.\n");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
-
-  try {
-    fl::sim::SimOptions options;
-    if (!config.empty()) {
-      options = fl::LoadYamlFile<fl::sim::SimOptions>(config);
-      if (!world.empty() && world != options.world.name) {
-        FL_LOG(WARN) << "--world " << world << " overrides world.name '" << options.world.name
-                     << "' of " << config;
-        options.world.name = world;
+  cli.AddCheck([&]() -> std::string {  // the flags override the options file
+    if (program.config_path().empty() && !world.empty()) {
+      try {
+        options = fl::sim::DefaultOptionsForWorld(world);
+      } catch (const std::exception& e) {
+        return e.what();
       }
-    } else if (!world.empty()) {
-      options = fl::sim::DefaultOptionsForWorld(world);
+    } else if (!world.empty() && world != options.world.name) {
+      FL_LOG(WARN) << "--world " << world << " overrides world.name '" << options.world.name
+                   << "' of " << program.config_path();
+      options.world.name = world;
     }
     if (seed != -1) options.seed = seed;
     if (duration != -1.0) options.duration_s = duration;
     if (rate < 0.0) {
-      std::fprintf(stderr, "fl-sim: --rate %g is negative; use 1 for real time or 0 for as fast "
-                           "as possible\n", rate);
-      return 2;
+      return "--rate " + fl::FormatDouble(rate) +
+             " is negative; use 1 for real time or 0 for as fast as possible";
     }
     const fl::Status valid = options.Validate();
-    if (!valid.ok()) {
-      std::fprintf(stderr, "fl-sim: invalid options: %s\n", valid.message().c_str());
-      return 2;
-    }
-    if (print_config) {
-      std::fputs(fl::SaveYamlString(options).c_str(), stdout);
-      return 0;
-    }
+    return valid.ok() ? "" : "invalid options: " + valid.message();
+  });
+  if (!program.Parse(argc, argv)) return program.exit_code();
+  return program.Run([&] {
     if (!top_view.empty()) {
       fl::sim::WriteTopView(options, top_view);
       FL_LOG(INFO) << "wrote " << top_view;
@@ -174,9 +170,6 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (!log_path.empty()) return RunLog(options, log_path);
-    return RunLive(options, url, rate);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "fl-sim: %s\n", e.what());
-    return 1;
-  }
+    return RunLive(options, process, rate);
+  });
 }

@@ -7,8 +7,8 @@
 #include <iostream>
 #include <sstream>
 
-#include "fusionloc/common/command_line.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/eval/plot.hpp"
 #include "fusionloc/eval/trajectory.hpp"
@@ -286,14 +286,14 @@ int Run(const Args& a) {
 }  // namespace fl::eval
 
 int main(int argc, char** argv) {
-  fl::SetLogProcessName("fl-eval");
   fl::eval::Args a;
-  fl::CommandLine cli("fl-eval",
+  fl::Program program("fl-eval",
                       "Compares an estimated trajectory EST with a reference REF: absolute "
                       "trajectory error after alignment, relative pose error, KITTI segment "
                       "drift and (optionally) the relation error of Kuemmerle et al. 2009. "
                       "EST and REF are LCM logs (poses read from a channel) or text files "
                       "(TUM, KITTI, 2D). Exit status: 0 ok, 1 bad input, 2 bad usage.");
+  fl::CommandLine& cli = program.cli();
   cli.AddPositional("EST", &a.est_path, "estimated trajectory: LCM log or text file");
   cli.AddPositional("REF", &a.ref_path, "reference trajectory: LCM log or text file");
   cli.AddFlag("est-channel", &a.est_channel,
@@ -341,7 +341,7 @@ int main(int argc, char** argv) {
       "  fl-eval slam.tum corrected.tum --align se2 --relations csail.relations --rpe-delta 1 "
       "--rpe-unit m\n"
       "Metric definitions: docs/EVALUATION.md\n");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
   try {
     return fl::eval::Run(a);
   } catch (const fl::eval::EvalError& e) {

@@ -32,6 +32,7 @@
 #include <utility>
 #include <vector>
 
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/common/status.hpp"
 
 namespace fl {
@@ -169,6 +170,10 @@ class YamlWriteArchive {
       *out_ << YAML::Flow << YAML::BeginSeq;
       for (const auto& e : v) Write(e);
       *out_ << YAML::EndSeq;
+    } else if constexpr (std::is_same_v<T, float>) {
+      *out_ << FormatFloat(v);  // shortest round-trip text, not 9 or 17 digits
+    } else if constexpr (std::is_floating_point_v<T>) {
+      *out_ << FormatDouble(static_cast<double>(v));
     } else {
       *out_ << v;
     }

@@ -1,8 +1,12 @@
 #include "fusionloc/stereo_vo/stereo_vo_lcm.hpp"
 
+#include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/log.hpp"
+#include "fusionloc/status_t.hpp"
 
 namespace fl::vo {
 
@@ -116,6 +120,128 @@ fusionloc::point_cloud_t KeyframePointsToLcm(const StereoVoResult& result) {
   m.num_intensities = static_cast<int32_t>(result.keyframe_intensities.size());
   m.intensities = result.keyframe_intensities;
   return m;
+}
+
+bool SameCalibration(const StereoCalibration& a, const StereoCalibration& b) {
+  auto close = [](double x, double y) { return std::abs(x - y) <= 1e-9 * (1 + std::abs(x)); };
+  return a.width == b.width && a.height == b.height && close(a.fx, b.fx) && close(a.fy, b.fy) &&
+         close(a.cx, b.cx) && close(a.cy, b.cy) && close(a.baseline, b.baseline) &&
+         a.rectified == b.rectified && a.T_base_camera.isApprox(b.T_base_camera, 1e-9);
+}
+
+std::vector<ChannelSpec> StereoVoNode::Inputs() {
+  return {{channels::kStereo, "bot_core.images_t",
+           "rectified LEFT/RIGHT pair, 8-bit GRAY, RGB or BGR (required)"},
+          {channels::kStereoCalibration, "fusionloc.stereo_calibration_t",
+           "intrinsics, baseline, T_base_camera (required before the first frame)"}};
+}
+
+std::vector<ChannelSpec> StereoVoNode::Outputs() {
+  return {{channels::kVoPose, "bot_core.pose_t", "T_world_base of every tracked frame"},
+          {channels::kVoFactors, "fusionloc.relative_pose_factor_t",
+           "keyframe-to-keyframe motion in the base frame, 6x6 information"},
+          {channels::kVoPoints, "fusionloc.point_cloud_t", "keyframe 3D points (camera frame)"}};
+}
+
+StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
+                           const ChannelMap& channels)
+    : options_(options),
+      lcm_(lcm),
+      ch_stereo_(channels(channels::kStereo)),
+      ch_calib_(channels(channels::kStereoCalibration)),
+      ch_pose_(channels(channels::kVoPose)),
+      ch_factors_(channels(channels::kVoFactors)),
+      ch_points_(channels(channels::kVoPoints)),
+      status_(lcm, kProgram) {
+  status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_calib_);
+  lcm_->Subscribe<fusionloc::stereo_calibration_t>(
+      ch_calib_,
+      [this](const fusionloc::stereo_calibration_t& m, const std::string&) { OnCalibration(m); });
+  lcm_->Subscribe<bot_core::images_t>(
+      ch_stereo_, [this](const bot_core::images_t& m, const std::string&) { OnStereo(m); });
+}
+
+StereoVoNode::~StereoVoNode() = default;
+
+void StereoVoNode::OnCalibration(const fusionloc::stereo_calibration_t& msg) {
+  status_.CountIn();
+  const StereoCalibration calib = CalibrationFromLcm(msg);
+  if (vo_ && SameCalibration(calib, active_calibration_)) return;  // periodic repeat
+  if (auto s = calib.Validate(); !s.ok()) {
+    status_.CountDropped(ch_calib_ + ": " + s.message());
+    status_.SetState(fusionloc::status_t::LEVEL_ERROR, ch_calib_ + ": " + s.message());
+    FL_LOG(ERROR) << ch_calib_ << ": " << s.message();
+    return;  // keep the previous valid calibration, if any
+  }
+  if (vo_) FL_LOG(WARN) << "calibration changed: restarting VO (new segment)";
+  vo_ = std::make_unique<StereoVo>(options_, calib);
+  active_calibration_ = calib;
+  status_.SetState(fusionloc::status_t::LEVEL_STARTING,
+                   "calibration received; waiting for " + ch_stereo_);
+  FL_LOG(INFO) << "calibration " << calib.width << "x" << calib.height << " fx " << calib.fx
+               << " baseline " << calib.baseline << " m";
+}
+
+void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
+  status_.CountIn();
+  if (!vo_) {
+    status_.CountDropped("stereo frame before a valid " + ch_calib_ +
+                         " (waiting for the calibration)");
+    return;
+  }
+  cv::Mat left, right;
+  if (auto s = StereoImagesToGray(msg, &left, &right); !s.ok()) {
+    status_.CountDropped(ch_stereo_ + ": " + s.message());
+    return;
+  }
+  const StereoVoResult r = vo_->AddStereoFrame(msg.utime, left, right);
+  ++frames_;
+  status_.AddItemTime(r.stats.ms_total);
+  const Utime stamp = lcm_->last_message_utime();
+  switch (r.state) {
+    case TrackingState::kRejected:
+      status_.CountDropped(r.message);
+      return;
+    case TrackingState::kNotTracked:
+      ++not_tracked_;
+      status_.SetState(fusionloc::status_t::LEVEL_WARN, r.message);
+      FL_LOG(WARN) << "frame " << msg.utime << ": " << r.message;
+      break;
+    case TrackingState::kInitialized:
+    case TrackingState::kTracked:
+      ++tracked_;
+      status_.SetState(fusionloc::status_t::LEVEL_OK, r.message);
+      if (r.new_segment) FL_LOG(WARN) << r.message;
+      lcm_->Publish(ch_pose_, PoseToLcm(r.utime, r.T_world_base), stamp);
+      status_.CountOut();
+      if (r.factor) {
+        lcm_->Publish(ch_factors_, FactorToLcm(*r.factor), stamp);
+        status_.CountOut();
+      }
+      if (r.is_keyframe) {
+        ++keyframes_;
+        lcm_->Publish(ch_points_, KeyframePointsToLcm(r), stamp);
+        status_.CountOut();
+      }
+      break;
+  }
+  status_.Set("frames", static_cast<double>(frames_));
+  status_.Set("tracked", static_cast<double>(tracked_));
+  status_.Set("not_tracked", static_cast<double>(not_tracked_));
+  status_.Set("keyframes", static_cast<double>(keyframes_));
+  status_.Set("inliers", r.stats.inliers);
+  status_.Set("features_left", r.stats.features_left);
+  status_.Set("segment", r.segment);
+  // Online rectification check (docs/STEREO_VO.md): a large or drifting value means the
+  // stereo calibration is off.
+  status_.Set("disparity_offset_px", r.stats.disparity_offset_px);
+  status_.Set("disparity_offset_sd_px", r.stats.disparity_offset_sd_px);
+}
+
+std::string StereoVoNode::Summary() const {
+  return "frames " + std::to_string(frames_) + ", tracked " + std::to_string(tracked_) +
+         ", not tracked " + std::to_string(not_tracked_) + ", keyframes " +
+         std::to_string(keyframes_) + ", dropped " + std::to_string(status_.dropped());
 }
 
 }  // namespace fl::vo

@@ -13,7 +13,7 @@
 //
 // Commands are split on whitespace (double quotes group words) and run directly with
 // execvp, never through a shell. ${NAME} is replaced from the variables given to fl-procman
-// (--var NAME=VALUE), then from the environment; an unknown name is an error naming it.
+// (--vars NAME=VALUE), then from the environment; an unknown name is an error naming it.
 #pragma once
 
 #include <map>
@@ -25,14 +25,14 @@
 namespace fl::procman {
 
 struct ProcessSpec {
-  std::string name;                  // unique; [A-Za-z0-9_-]; also the log file name
-  std::string command;               // program and arguments (see the file comment)
+  std::string name;                    // unique; [A-Za-z0-9_-]; also the log file name
+  std::string command;                 // program and arguments (see the file comment)
   std::string restart = "on_failure";  // never | on_failure (non-zero exit or signal) | always
-  int max_restarts = 3;              // restarts before the process is given up
-  double restart_delay_s = 1.0;      // [s] wait before a restart
-  double start_delay_s = 0.0;        // [s] after the launch starts
-  std::string on_exit = "continue";  // continue | stop_all (its exit ends the run)
-  bool required = true;              // given up after a failure -> the run stops and fails
+  int max_restarts = 3;                // restarts before the process is given up
+  double restart_delay_s = 1.0;        // [s] wait before a restart
+  double start_delay_s = 0.0;          // [s] after the launch starts
+  std::string on_exit = "continue";    // continue | stop_all (its exit ends the run)
+  bool required = true;                // given up after a failure -> the run stops and fails
 
   template <class A>
   void Serialize(A* a) {
@@ -49,10 +49,10 @@ struct ProcessSpec {
 };
 
 struct LaunchFile {
-  std::string name = "launch";     // shown in status lines and the report
-  double stop_timeout_s = 5.0;     // [s] SIGTERM, then SIGKILL after this long
-  double end_grace_s = 3.0;        // [s] after a stop_all exit, before the others are stopped
-                                   // (estimators finish the queue, the fusion saves its map)
+  std::string name = "launch";  // shown in status lines and the report
+  double stop_timeout_s = 5.0;  // [s] SIGTERM, then SIGKILL after this long
+  double end_grace_s = 3.0;     // [s] after a stop_all exit, before the others are stopped
+                                // (estimators finish the queue, the fusion saves its map)
   std::vector<ProcessSpec> processes;
 
   template <class A>
@@ -74,7 +74,6 @@ bool ExpandVariables(const std::string& text, const std::map<std::string, std::s
                      std::string* out, std::string* error);
 
 // Splits a command line on blanks; "double quotes" keep blanks. False on an open quote.
-bool SplitCommand(const std::string& command, std::vector<std::string>* argv,
-                  std::string* error);
+bool SplitCommand(const std::string& command, std::vector<std::string>* argv, std::string* error);
 
 }  // namespace fl::procman

@@ -1,12 +1,20 @@
-// Conversions between the stereo VO library and LCM messages, shared by the fl-stereo-vo
-// process and the stereo benchmark (target fl_stereo_vo_lcm; the core library has no LCM).
+// The stereo VO's LCM adapter (target fl_stereo_vo_lcm; the core library has no LCM):
+// conversions between the library and LCM messages, shared with the benchmarks, and
+// StereoVoNode, which fl-stereo-vo and fl-replay run.
+//   in:  STEREO (bot_core.images_t LEFT/RIGHT, GRAY/RGB/BGR), STEREO_CALIBRATION
+//   out: VO_POSE (bot_core.pose_t, T_world_base), VO_FACTORS (relative_pose_factor_t between
+//        keyframes, base frame, SOURCE_VISION), VO_POINTS (point_cloud_t per keyframe, frame
+//        "camera"), STATUS_FL_STEREO_VO (status_t).
 #pragma once
 
+#include <memory>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "bot_core/images_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/point_cloud_t.hpp"
 #include "fusionloc/relative_pose_factor_t.hpp"
@@ -28,5 +36,35 @@ StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg)
 bot_core::pose_t PoseToLcm(Utime utime, const Eigen::Isometry3d& T_world_base);
 fusionloc::relative_pose_factor_t FactorToLcm(const KeyframeFactor& factor);
 fusionloc::point_cloud_t KeyframePointsToLcm(const StereoVoResult& result);
+
+// Same image size, intrinsics, baseline, rectification and mounting (to 1e-9): the periodic
+// repeats of STEREO_CALIBRATION do not restart the VO.
+bool SameCalibration(const StereoCalibration& a, const StereoCalibration& b);
+
+class StereoVoNode : public LcmNode {
+ public:
+  static constexpr const char* kProgram = "fl-stereo-vo";
+  static std::vector<ChannelSpec> Inputs();
+  static std::vector<ChannelSpec> Outputs();
+
+  StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm, const ChannelMap& channels);
+  ~StereoVoNode() override;
+
+  StatusReporter& status() override { return status_; }
+  std::vector<std::string> RequiredInputs() const override { return {ch_stereo_, ch_calib_}; }
+  std::string Summary() const override;
+
+ private:
+  void OnCalibration(const fusionloc::stereo_calibration_t& msg);
+  void OnStereo(const bot_core::images_t& msg);
+
+  StereoVoOptions options_;
+  LcmInterface* lcm_;
+  std::string ch_stereo_, ch_calib_, ch_pose_, ch_factors_, ch_points_;
+  StatusReporter status_;
+  std::unique_ptr<StereoVo> vo_;
+  StereoCalibration active_calibration_;
+  int64_t frames_ = 0, tracked_ = 0, not_tracked_ = 0, keyframes_ = 0;
+};
 
 }  // namespace fl::vo

@@ -1,11 +1,16 @@
 #include "fusionloc/common/lcm_interface.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <deque>
 #include <lcm/lcm-cpp.hpp>
+#include <queue>
 #include <regex>
 #include <stdexcept>
+
+#include "fusionloc/common/program.hpp"
 
 namespace fl {
 namespace {
@@ -85,11 +90,15 @@ class LcmLive final : public LcmInterface {
 };
 
 // ---- log replay: reads one log, writes published messages to another ----
+// Published messages are also delivered to this process's own subscribers (as live LCM does),
+// before the next input event, so that several nodes in one process (fl-replay) form the same
+// pipeline as separate processes. Everything published while handling a message is stamped
+// with that message's log time.
 class LcmLogReplay final : public LcmInterface {
  public:
-  LcmLogReplay(const std::string& url, const std::string& in_path, const std::string& out_path)
-      : url_(url), reader_(in_path) {
-    if (!out_path.empty()) writer_ = std::make_unique<LcmLogWriter>(out_path);
+  explicit LcmLogReplay(const LogReplayOptions& options, std::string url)
+      : url_(std::move(url)), options_(options), reader_(options.in_path) {
+    if (!options.out_path.empty()) writer_ = std::make_unique<LcmLogWriter>(options.out_path);
   }
   ~LcmLogReplay() override {
     if (writer_) {
@@ -104,52 +113,151 @@ class LcmLogReplay final : public LcmInterface {
   void PublishRaw(const std::string& channel, const void* data, int size, Utime utime) override {
     // Outputs are stamped with the log time of the input being handled, if any, so that the
     // output log lines up with the input log.
-    const Utime t = in_dispatch_ ? last_message_utime() : utime;
+    const Utime t = in_dispatch_ ? dispatch_utime_ : utime;
     if (writer_) writer_->Write(channel, data, size, t);
     CountPublished();
+    if (!Matching(channel).empty()) {
+      Queued q;
+      q.channel = channel;
+      q.utime = t;
+      q.data.assign(static_cast<const uint8_t*>(data), static_cast<const uint8_t*>(data) + size);
+      loopback_.push_back(std::move(q));
+    }
   }
 
   void SubscribeRaw(const std::string& channel_regex, RawHandler handler) override {
     subs_.push_back({std::regex(channel_regex, std::regex::extended), std::move(handler)});
+    match_cache_.clear();
   }
 
   int HandleSubscriptions(int) override {
-    if (finished_) return -1;
-    if (!reader_.Next(&event_)) {
-      finished_ = true;
-      const std::string problems = reader_.ProblemSummary();
-      if (!problems.empty()) FL_LOG(WARN) << problems;
-      return -1;
-    }
-    CountReceived(event_.utime);
-    in_dispatch_ = true;
-    for (auto& s : subs_) {
-      if (std::regex_match(event_.channel, s.regex)) {
-        s.handler(event_.channel, event_.data.data(), static_cast<int>(event_.data.size()),
-                  event_.utime);
+    // Messages published by this process's handlers first, in the order they were published.
+    if (!loopback_.empty()) {
+      int n = 0;
+      while (!loopback_.empty()) {
+        Queued q = std::move(loopback_.front());
+        loopback_.pop_front();
+        Dispatch(q.channel, q.data, q.utime);
+        ++n;
       }
+      return n;
     }
-    in_dispatch_ = false;
+    LcmLogEvent event;
+    if (!NextInput(&event)) return -1;
+    if (writer_ && options_.copy_inputs) {
+      writer_->Write(event.channel, event.data.data(), static_cast<int>(event.data.size()),
+                     event.utime);
+    }
+    Dispatch(event.channel, event.data, event.utime);
     return 1;
   }
 
   std::string url() const override { return url_; }
+  Utime Now() const override { return in_dispatch_ ? dispatch_utime_ : last_message_utime(); }
+  bool replaying() const override { return true; }
+  std::map<std::string, int64_t> LogChannelCounts() const override { return counts_; }
+  std::string LogProblems() const override { return reader_.ProblemSummary(); }
+  double LogProgress() const override {
+    if (finished_) return 1.0;
+    return reader_.file_size() > 0
+               ? static_cast<double>(reader_.position()) / static_cast<double>(reader_.file_size())
+               : 1.0;
+  }
 
  private:
   struct Sub {
     std::regex regex;
     RawHandler handler;
   };
+  struct Queued {
+    std::string channel;
+    Utime utime = 0;
+    std::vector<uint8_t> data;
+  };
+  struct Pending {
+    LcmLogEvent event;
+    int64_t order = 0;
+  };
+  struct Later {
+    bool operator()(const Pending& a, const Pending& b) const {
+      if (a.event.utime != b.event.utime) return a.event.utime > b.event.utime;
+      return a.order > b.order;
+    }
+  };
+
+  // Indices of the subscriptions whose regex matches `channel` (cached per channel).
+  const std::vector<size_t>& Matching(const std::string& channel) {
+    auto it = match_cache_.find(channel);
+    if (it != match_cache_.end()) return it->second;
+    std::vector<size_t> idx;
+    for (size_t i = 0; i < subs_.size(); ++i) {
+      if (std::regex_match(channel, subs_[i].regex)) idx.push_back(i);
+    }
+    return match_cache_.emplace(channel, std::move(idx)).first->second;
+  }
+
+  void Dispatch(const std::string& channel, const std::vector<uint8_t>& data, Utime utime) {
+    CountReceived(utime);
+    const bool outer = in_dispatch_;
+    const Utime outer_utime = dispatch_utime_;
+    in_dispatch_ = true;
+    dispatch_utime_ = utime;
+    const std::vector<size_t> idx = Matching(channel);  // copy: a handler may subscribe
+    for (size_t i : idx) {
+      subs_[i].handler(channel, data.data(), static_cast<int>(data.size()), utime);
+    }
+    in_dispatch_ = outer;
+    dispatch_utime_ = outer_utime;
+  }
+
+  // The next input event to deliver, in time-stamp order within the reorder window.
+  bool NextInput(LcmLogEvent* out) {
+    const Utime window = SecondsToUtime(options_.reorder_window_s);
+    while (!finished_) {
+      if (!pending_.empty() && newest_read_ - pending_.top().event.utime >= window && window > 0) {
+        break;
+      }
+      if (!pending_.empty() && window == 0) break;
+      Pending p;
+      if (!reader_.Next(&p.event)) {
+        finished_ = true;
+        const std::string problems = reader_.ProblemSummary();
+        if (!problems.empty()) FL_LOG(WARN) << problems;
+        break;
+      }
+      ++counts_[p.event.channel];
+      if (options_.drop_channels.count(p.event.channel)) continue;
+      newest_read_ = std::max(newest_read_, p.event.utime);
+      p.order = next_order_++;
+      pending_.push(std::move(p));
+    }
+    if (pending_.empty()) return false;
+    *out = std::move(const_cast<Pending&>(pending_.top()).event);
+    pending_.pop();
+    return true;
+  }
+
   std::string url_;
+  LogReplayOptions options_;
   LcmLogReader reader_;
   std::unique_ptr<LcmLogWriter> writer_;
   std::vector<Sub> subs_;
-  LcmLogEvent event_;
+  std::map<std::string, std::vector<size_t>> match_cache_;
+  std::deque<Queued> loopback_;
+  std::priority_queue<Pending, std::vector<Pending>, Later> pending_;
+  std::map<std::string, int64_t> counts_;
+  int64_t next_order_ = 0;
+  Utime newest_read_ = INT64_MIN;
   bool finished_ = false;
   bool in_dispatch_ = false;
+  Utime dispatch_utime_ = 0;
 };
 
 }  // namespace
+
+std::unique_ptr<LcmInterface> MakeLogReplay(const LogReplayOptions& options) {
+  return std::make_unique<LcmLogReplay>(options, "log:" + options.in_path);
+}
 
 std::unique_ptr<LcmInterface> MakeLcm(const std::string& url) {
   if (url.rfind("log:", 0) == 0) {
@@ -158,15 +266,18 @@ std::unique_ptr<LcmInterface> MakeLcm(const std::string& url) {
     const std::string in = spec.substr(0, comma);
     const std::string out = comma == std::string::npos ? "" : spec.substr(comma + 1);
     if (in.empty()) {
-      throw std::runtime_error("LCM URL '" + url + "' names no input log; use log:IN[,OUT]");
+      throw UsageError("LCM URL '" + url + "' names no input log; use log:IN[,OUT]");
     }
-    return std::make_unique<LcmLogReplay>(url, in, out);
+    LogReplayOptions options;
+    options.in_path = in;
+    options.out_path = out;
+    return std::make_unique<LcmLogReplay>(options, url);
   }
   if (url.rfind("udpm://", 0) == 0 || url.rfind("memq://", 0) == 0 || url.empty()) {
     return std::make_unique<LcmLive>(url);
   }
-  throw std::runtime_error("unsupported LCM URL '" + url +
-                           "': use udpm://GROUP:PORT?ttl=0, memq:// or log:IN.lcmlog[,OUT.lcmlog]");
+  throw UsageError("unsupported LCM URL '" + url +
+                   "': use udpm://GROUP:PORT?ttl=0, memq:// or log:IN.lcmlog[,OUT.lcmlog]");
 }
 
 // ---------------------------------------------------------------------------------------

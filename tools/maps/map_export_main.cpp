@@ -3,9 +3,9 @@
 #include <map>
 #include <sstream>
 
-#include "fusionloc/common/command_line.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/maps/map_export.hpp"
 
 namespace {
@@ -83,14 +83,14 @@ int Run(const std::string& log_path, const std::string& channel, const std::stri
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::SetLogProcessName("fl-map-export");
   std::string log_path, channel = "RBPF_MAP", out;
   double resolution = 0.05;
-  fl::CommandLine cli("fl-map-export",
+  fl::Program program("fl-map-export",
                       "Exports the last map message of a channel in an LCM log: an occupancy grid "
                       "(fusionloc.occupancy_grid_t) to PREFIX.pgm + PREFIX.yaml (ROS map_server) "
                       "+ PREFIX.png, or a point cloud (fusionloc.point_cloud_t) to PREFIX.pcd "
                       "(binary) + PREFIX_top.png. Exit status: 0 ok, 1 bad input, 2 bad usage.");
+  fl::CommandLine& cli = program.cli();
   cli.AddPositional("LOG", &log_path, "LCM log with the map channel");
   cli.AddFlag("channel", &channel, "map channel: RBPF_MAP, FUSED_MAP, VO_POINTS, ...");
   cli.AddFlag("out", &out, "output prefix (folder must exist), e.g. out/intel_map");
@@ -99,7 +99,7 @@ int main(int argc, char** argv) {
       "\nExample:\n  fl-map-export slam.lcmlog --channel RBPF_MAP --out out/map\n"
       "  (then: ros2 run nav2_map_server map_server --ros-args -p "
       "yaml_filename:=out/map.yaml)\n");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
   try {
     return Run(log_path, channel, out, resolution);
   } catch (const std::exception& e) {

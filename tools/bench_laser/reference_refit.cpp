@@ -1,4 +1,4 @@
-#include "fusionloc/rbpf_slam/reference_refit.hpp"
+#include "reference_refit.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -53,8 +53,7 @@ RefitResult RefitReference(const std::vector<RefitScan>& scans, const RbpfSlamOp
     throw std::invalid_argument("RefitReference: needs at least 2 scans, got " +
                                 std::to_string(scans.size()));
   }
-  const fl::Pose2 T_base_laser(options.base_laser_x, options.base_laser_y,
-                               options.base_laser_yaw);
+  const fl::Pose2 T_base_laser(options.base_laser_x, options.base_laser_y, options.base_laser_yaw);
   const int n = static_cast<int>(scans.size());
   std::vector<std::vector<Eigen::Vector2d>> points(n);
   std::vector<std::vector<PointNormal>> normals(n);

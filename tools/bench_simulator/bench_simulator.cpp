@@ -1,5 +1,5 @@
-// fl-bench-simulator (./fusionloc bench simulator): how fast the simulator writes logs, how far its raw
-// odometry drifts, and the calibration of the camera pixel noise: the error of stereo
+// fl-bench-simulator (./fusionloc bench simulator): how fast the simulator writes logs, how far its
+// raw odometry drifts, and the calibration of the camera pixel noise: the error of stereo
 // triangulated ORB corners against the rendered ground-truth depth, for several noise levels.
 #include <time.h>
 
@@ -13,7 +13,7 @@
 #include <sstream>
 
 #include "fusionloc/bench/bench.hpp"
-#include "fusionloc/common/command_line.hpp"
+#include "fusionloc/common/program.hpp"
 #include "fusionloc/sim/simulator.hpp"
 
 namespace {
@@ -64,8 +64,10 @@ fl::bench::Run BenchLog(const std::string& world, double duration, const std::st
   bool have_first = false;
   Eigen::Vector2d prev;
   while (sim.Step(&f)) {
-    if (!have_first) first = f, have_first = true;
-    else path_m += (f.T_world_base.translation() - prev).norm();
+    if (!have_first)
+      first = f, have_first = true;
+    else
+      path_m += (f.T_world_base.translation() - prev).norm();
     prev = f.T_world_base.translation();
   }
   // Odometry starts at the true start pose: compare in the world frame.
@@ -98,10 +100,10 @@ fl::bench::Run BenchLog(const std::string& world, double duration, const std::st
 }
 
 struct TriangulationErrors {
-  std::vector<double> typical;  // |error| [m] of corners with true depth in [4, 6] m
-  std::vector<double> all;      // true depth in [1, 10] m
+  std::vector<double> typical;          // |error| [m] of corners with true depth in [4, 6] m
+  std::vector<double> all;              // true depth in [1, 10] m
   std::vector<double> typical_integer;  // same corners, integer (unrefined) disparity
-  int outliers = 0;             // |error| > 1 m (mismatches), excluded from the statistics
+  int outliers = 0;                     // |error| > 1 m (mismatches), excluded from the statistics
   int matches = 0;
 };
 
@@ -147,8 +149,10 @@ void Triangulate(const cv::Mat& left, const cv::Mat& right, const std::vector<fl
         const double disp = pl.x - kr[static_cast<size_t>(j)].pt.x;
         if (disp <= 0 || disp > max_disp) continue;
         const double d = cv::norm(dl.row(static_cast<int>(i)), dr.row(j), cv::NORM_HAMMING);
-        if (d < best_d) second = best_d, best_d = d, best = j;
-        else if (d < second) second = d;
+        if (d < best_d)
+          second = best_d, best_d = d, best = j;
+        else if (d < second)
+          second = d;
       }
     }
     if (best < 0 || best_d > 50 || best_d > 0.8 * second) continue;
@@ -163,7 +167,8 @@ void Triangulate(const cv::Mat& left, const cv::Mat& right, const std::vector<fl
     if (!std::isfinite(z_true)) continue;
     bool smooth = true;
     for (int dv = -1; dv <= 1; ++dv) {
-      for (int du = -1; du <= 1; ++du) smooth &= std::fabs(at(ul + du, v + dv) - z_true) < 0.02 * z_true;
+      for (int du = -1; du <= 1; ++du)
+        smooth &= std::fabs(at(ul + du, v + dv) - z_true) < 0.02 * z_true;
     }
     if (!smooth || z_true < 1.0 || z_true > 10.0) continue;
     double sad[7];
@@ -238,18 +243,20 @@ fl::bench::Run BenchTriangulation(const std::string& world, double sigma, int fr
       .Add("rms_err_1_10m", Rms(errors.all))
       .Add("matches", errors.matches)
       .Add("outlier_pct", 100.0 * errors.outliers / std::max(1, errors.matches));
-  run.note = "ORB + row search + SAD sub-pixel refinement; error = |triangulated - true| of "
-             "corners on smooth surfaces; errors > 1 m counted as outliers";
+  run.note =
+      "ORB + row search + SAD sub-pixel refinement; error = |triangulated - true| of "
+      "corners on smooth surfaces; errors > 1 m counted as outliers";
   return run;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  fl::CommandLine cli("fl-bench-simulator",
+  fl::Program program("fl-bench-simulator",
                       "Simulator benchmark: log-writing speed per world, raw odometry drift, and "
                       "the stereo triangulation error of ORB corners for several pixel-noise "
                       "levels (the calibration of camera.pixel_noise_sigma).");
+  fl::CommandLine& cli = program.cli();
   fl::bench::CommonArgs args;
   fl::bench::AddCommonFlags(&cli, &args, "sim");
   std::string worlds = "paper,corridor", sigmas = "0,3,6,8,10";
@@ -264,7 +271,7 @@ int main(int argc, char** argv) {
   bool corridor_triangulation = true;
   cli.AddFlag("corridor-triangulation", &corridor_triangulation,
               "also measure the triangulation error in the corridor world at the default noise");
-  if (!cli.Parse(argc, argv)) return cli.exit_code();
+  if (!program.Parse(argc, argv)) return program.exit_code();
   if (frames < 1) {
     std::cerr << "fl-bench-simulator: --frames must be >= 1\n";
     return 2;
@@ -279,7 +286,8 @@ int main(int argc, char** argv) {
     if (corridor_triangulation) {
       // The corridor at the default noise: are its textures as good for stereo as the paper's?
       report.AddRun(BenchTriangulation(
-          "corridor", fl::sim::DefaultOptionsForWorld("corridor").camera.pixel_noise_sigma, frames));
+          "corridor", fl::sim::DefaultOptionsForWorld("corridor").camera.pixel_noise_sigma,
+          frames));
     }
     fl::bench::Publish(report, args);
   } catch (const std::exception& e) {

@@ -31,23 +31,23 @@ namespace fl::rbpf {
 
 // Odometry noise per step (see above); RefitOdometrySigma::FromMotion gives the filter's model.
 struct RefitOdometrySigma {
-  double trans_per_m = 0.05;     // [m/m]
-  double trans_per_rad = 0.01;   // [m/rad]
-  double rot_per_rad = 0.05;     // [rad/rad]
-  double rot_per_m = 0.01;       // [rad/m]
-  double min_sigma_xy = 0.001;   // [m]
-  double min_sigma_rad = 0.0005; // [rad]
+  double trans_per_m = 0.05;      // [m/m]
+  double trans_per_rad = 0.01;    // [m/rad]
+  double rot_per_rad = 0.05;      // [rad/rad]
+  double rot_per_m = 0.01;        // [rad/m]
+  double min_sigma_xy = 0.001;    // [m]
+  double min_sigma_rad = 0.0005;  // [rad]
 
   static RefitOdometrySigma FromMotion(const MotionOptions& m);
 };
 
 struct RefitOptions {
-  double pair_radius_m = 4.0;      // [m] ICP edges to earlier scans this close (by the reference)
-  int max_pairs = 10;              // [-] ... at most this many, nearest first (plus scan k-1)
-  double max_icp_move_m = 0.3;     // [m] ICP results moved farther from the start are left out
-  double max_icp_move_rad = 0.1;   // [rad]
-  double icp_huber = 3.0;          // [-] Huber scale on the whitened ICP residual (0 = none)
-  int max_iterations = 200;        // [-] Levenberg-Marquardt iterations
+  double pair_radius_m = 4.0;     // [m] ICP edges to earlier scans this close (by the reference)
+  int max_pairs = 10;             // [-] ... at most this many, nearest first (plus scan k-1)
+  double max_icp_move_m = 0.3;    // [m] ICP results moved farther from the start are left out
+  double max_icp_move_rad = 0.1;  // [rad]
+  double icp_huber = 3.0;         // [-] Huber scale on the whitened ICP residual (0 = none)
+  int max_iterations = 200;       // [-] Levenberg-Marquardt iterations
 
   Status Validate() const;
 };
@@ -62,10 +62,10 @@ struct RefitScan {
 struct RefitResult {
   std::vector<fl::Pose2> T_world_base;  // the optimum, one per input scan
   int odometry_edges = 0;
-  int icp_edges = 0;                    // ICP edges used
-  int icp_left_out = 0;                 // candidate pairs whose ICP failed or moved too far
-  double initial_cost = 0.0;            // ½ Σ whitened squared residuals at the reference
-  double final_cost = 0.0;              // ... at the optimum
+  int icp_edges = 0;          // ICP edges used
+  int icp_left_out = 0;       // candidate pairs whose ICP failed or moved too far
+  double initial_cost = 0.0;  // ½ Σ whitened squared residuals at the reference
+  double final_cost = 0.0;    // ... at the optimum
 };
 
 // Scans must be in time order with the same beam geometry (beams over icp's grid max range,

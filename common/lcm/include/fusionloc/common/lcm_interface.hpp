@@ -16,7 +16,9 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -53,18 +55,31 @@ class LcmInterface {
   // Time of the message being (or last) dispatched: log time during replay, receive time live.
   Utime last_message_utime() const { return last_message_utime_; }
 
+  // The clock of this process: wall time live; when replaying a log, the data time of the
+  // message being (or last) handled, so that everything published in log mode, STATUS
+  // included, carries data time.
+  virtual Utime Now() const { return NowUtime(); }
+  // True when reading a log (log:...): no wall-clock values should go into what is published.
+  virtual bool replaying() const { return false; }
+  // Log mode: events read so far per channel (all channels of the log); empty live.
+  virtual std::map<std::string, int64_t> LogChannelCounts() const { return {}; }
+  // Log mode: problems met reading the log ("" if none): corrupt bytes, truncation.
+  virtual std::string LogProblems() const { return ""; }
+  // Log mode: fraction of the input read, in [0, 1]; -1 live.
+  virtual double LogProgress() const { return -1.0; }
+
   int64_t messages_published() const { return published_; }
   int64_t messages_received() const { return received_; }
   int64_t decode_errors() const { return decode_warning_.count(); }
 
-  // Encodes and publishes an lcm-gen message. `utime` defaults to the message's utime field
-  // when it has one, else the current time.
+  // Encodes and publishes an lcm-gen message. `utime` (the time stamp written to logs)
+  // defaults to Now().
   template <class Msg>
   void Publish(const std::string& channel, const Msg& msg, Utime utime = -1) {
     const int size = msg.getEncodedSize();
     buffer_.resize(static_cast<size_t>(size));
     msg.encode(buffer_.data(), 0, size);
-    PublishRaw(channel, buffer_.data(), size, utime >= 0 ? utime : NowUtime());
+    PublishRaw(channel, buffer_.data(), size, utime >= 0 ? utime : Now());
   }
 
   // Decodes messages of type Msg on `channel_regex` and calls `handler(msg, channel)`.
@@ -103,9 +118,25 @@ class LcmInterface {
 // Makes an interface from a URL:
 //   udpm://...  or memq://         live LCM (lcm::LCM)
 //   log:IN[,OUT]                  replay IN (an LCM log file) as fast as handled; messages
-//                                 published go to OUT if given (else they are counted and dropped).
-// Throws std::runtime_error with a clear message if the URL cannot be opened.
+//                                 published go to OUT if given (else they are counted and dropped)
+//                                 and to this process's own subscribers, as live LCM does.
+// Throws fl::UsageError (exit code 2) for a URL that is malformed or of an unknown kind, and
+// std::runtime_error naming the cause (exit code 1) if it cannot be opened.
 std::unique_ptr<LcmInterface> MakeLcm(const std::string& url = kDefaultLcmUrl);
+
+// Log replay with more control than log:IN,OUT (fl-replay).
+struct LogReplayOptions {
+  std::string in_path;       // the LCM log to read
+  std::string out_path;      // where published messages go ("" = nowhere)
+  bool copy_inputs = false;  // also write the delivered input events to out_path
+  // Deliver input events in time-stamp order within this window of log time [s] (stable for
+  // equal stamps); 0 keeps the log's order.
+  double reorder_window_s = 0.0;
+  // Input channels neither delivered nor copied (e.g. a recorded run's old estimator outputs,
+  // which the replay produces anew). They are still counted in LogChannelCounts().
+  std::set<std::string> drop_channels;
+};
+std::unique_ptr<LcmInterface> MakeLogReplay(const LogReplayOptions& options);
 
 // ---------------------------------------------------------------------------------------
 // LCM log files (the format of lcm-logger / lcm-logplayer), read and written directly so that

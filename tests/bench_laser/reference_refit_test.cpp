@@ -1,4 +1,4 @@
-#include "fusionloc/rbpf_slam/reference_refit.hpp"
+#include "reference_refit.hpp"
 
 #include <gtest/gtest.h>
 
@@ -49,7 +49,8 @@ RefitOdometrySigma Sigma() {
 
 double MaxError(const std::vector<fl::Pose2>& a, const std::vector<fl::Pose2>& b) {
   double e = 0.0;
-  for (size_t k = 0; k < a.size(); ++k) e = std::max(e, std::hypot(a[k].x - b[k].x, a[k].y - b[k].y));
+  for (size_t k = 0; k < a.size(); ++k)
+    e = std::max(e, std::hypot(a[k].x - b[k].x, a[k].y - b[k].y));
   return e;
 }
 

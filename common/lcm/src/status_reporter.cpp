@@ -25,14 +25,18 @@ void StatusReporter::AddItemTime(double ms) {
   ++item_count_;
 }
 
+void StatusReporter::SetTiming(const std::string& key, double ms) {
+  if (!lcm_->replaying()) values_[key] = ms;
+}
+
 void StatusReporter::SetState(int level, const std::string& message) {
   level_ = level;
   message_ = message;
 }
 
 void StatusReporter::Tick(bool force) {
-  const Utime now = NowUtime();
-  if (!force && UtimeToSeconds(now - last_publish_) < period_s_) return;
+  const Utime now = lcm_->Now();
+  if (!force && now >= last_publish_ && UtimeToSeconds(now - last_publish_) < period_s_) return;
   last_publish_ = now;
   fusionloc::status_t st;
   st.utime = now;
@@ -42,7 +46,7 @@ void StatusReporter::Tick(bool force) {
   st.messages_in = in_;
   st.messages_out = out_;
   st.messages_dropped = dropped_;
-  st.cpu_ms_per_item = item_count_ > 0 ? item_ms_sum_ / item_count_ : 0.0;
+  st.cpu_ms_per_item = item_count_ > 0 && !lcm_->replaying() ? item_ms_sum_ / item_count_ : 0.0;
   item_ms_sum_ = 0.0;
   item_count_ = 0;
   st.num_keys = static_cast<int32_t>(values_.size());

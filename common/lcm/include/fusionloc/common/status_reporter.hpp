@@ -1,4 +1,8 @@
-// Publishes a process's fusionloc.status_t about once per second on STATUS_<NAME>.
+// Publishes a process's fusionloc.status_t about once per second on STATUS_<NAME>, where NAME
+// is the program name upper-cased with '-' as '_' (fl-rbpf-slam -> STATUS_FL_RBPF_SLAM).
+// The period and the stamps are on the LCM interface's clock (data time when replaying a log).
+// When replaying, wall-clock timings (AddItemTime, SetTiming) are left out of the message so
+// that the same log gives the same bytes; live they are published.
 //
 //   fl::StatusReporter status(lcm.get(), "fl-rbpf-slam");
 //   status.CountIn(); ... status.CountOut(); status.CountDropped("time went backwards");
@@ -25,12 +29,17 @@ class StatusReporter {
   // Adds processing time of one item, for the cpu_ms_per_item field.
   void AddItemTime(double ms);
   void Set(const std::string& key, double value) { values_[key] = value; }
+  // A wall-clock measurement [ms] (published live only, see the file comment).
+  void SetTiming(const std::string& key, double ms);
   // level: fusionloc::status_t::LEVEL_*; message shown in lcm-spy.
   void SetState(int level, const std::string& message);
 
   // Publishes if `period_s` has passed since the last report (or if force).
   void Tick(bool force = false);
   std::string channel() const { return channel_; }
+  const std::string& process() const { return process_; }
+  int level() const { return level_; }
+  const std::string& message() const { return message_; }
   int64_t dropped() const { return dropped_; }
 
  private:

@@ -1,0 +1,122 @@
+// The RBPF-SLAM's LCM adapter (target fl_rbpf_slam_lcm; the core library has no LCM):
+// message conversions, the scan/odometry synchronisation, and RbpfSlamNode, which fl-rbpf-slam
+// and fl-replay run.
+//
+// In:  LASER (bot_core.planar_lidar_t), ODOMETRY (fusionloc.wheel_odometry_t, interpolated at
+//      each scan's time), STEREO_CALIBRATION (fusionloc.stereo_calibration_t: T_base_laser, read
+//      before the first scan; identity if never received).
+// Out: RBPF_POSE (bot_core.pose_t, every scan), RBPF_FACTORS (fusionloc.relative_pose_factor_t,
+//      ICP factors between laser keyframes in the base frame, information in the x, y, yaw
+//      rows/cols 0, 1, 5), RBPF_TRAJECTORY (fusionloc.trajectory_t, keyframe poses whenever the
+//      pose graph changes and at the end), RBPF_MAP (fusionloc.occupancy_grid_t, every
+//      map_period_s of data time and at the end), STATUS_FL_RBPF_SLAM.
+#pragma once
+
+#include <deque>
+#include <functional>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "bot_core/planar_lidar_t.hpp"
+#include "bot_core/pose_t.hpp"
+#include "fusionloc/common/channel_map.hpp"
+#include "fusionloc/common/command_line.hpp"
+#include "fusionloc/common/lcm_process.hpp"
+#include "fusionloc/common/stream_merger.hpp"
+#include "fusionloc/occupancy_grid_t.hpp"
+#include "fusionloc/rbpf_slam/odometry_buffer.hpp"
+#include "fusionloc/rbpf_slam/rbpf_slam.hpp"
+#include "fusionloc/relative_pose_factor_t.hpp"
+#include "fusionloc/trajectory_t.hpp"
+
+namespace fl::rbpf {
+
+// ---- conversions ----
+LaserScan ScanFromLcm(const bot_core::planar_lidar_t& msg);
+bot_core::pose_t PoseToLcm(Utime utime, const Pose2& T_world_base);
+// Information goes to the x, y, yaw rows/cols (0, 1, 5) of the 6x6; SOURCE_LASER.
+fusionloc::relative_pose_factor_t FactorToLcm(const KeyframeFactor& factor);
+fusionloc::trajectory_t TrajectoryToLcm(Utime utime, const std::vector<StampedPose2>& poses);
+// Cells in percent (100 / (1 + e^-logodds)), -1 where unknown; empty grid if nothing observed.
+fusionloc::occupancy_grid_t GridToLcm(Utime utime, const TiledGrid& grid);
+
+// ---- scan/odometry synchronisation ----
+// Puts LASER and ODOMETRY in time order (StreamMerger with `merge_latency_s`) and hands each
+// scan on once odometry at or after its time has been buffered (or it has waited
+// `merge_latency_s` of data time), with the odometry interpolated at the scan's time.
+class ScanOdometrySync {
+ public:
+  // `odom` is null when running without odometry; `lookup` says why there is none otherwise.
+  using OnScan =
+      std::function<void(const LaserScan& scan, const Pose2* odom, const Status& lookup)>;
+
+  ScanOdometrySync(double merge_latency_s, bool use_odometry);
+
+  // Errors (time going backwards, too late) are returned and the message dropped.
+  Status PushScan(LaserScan scan);
+  Status PushOdometry(Utime utime, const Pose2& odom);
+  // Hands on every scan that is ready; with flush, every scan still waiting too. Odometry the
+  // buffer refuses is reported through `warn`.
+  void Process(bool flush, const OnScan& on_scan,
+               const std::function<void(const std::string&)>& warn);
+  size_t waiting() const { return pending_.size(); }
+
+ private:
+  using Input = std::variant<LaserScan, Pose2>;
+  bool use_odometry_;
+  Utime max_wait_us_;
+  StreamMerger<Input> merger_;
+  int laser_stream_ = -1, odom_stream_ = -1;
+  OdometryBuffer odom_buffer_;
+  std::deque<LaserScan> pending_;
+  bool flushed_ = false;
+};
+
+// ---- the node ----
+struct RbpfSlamNodeOptions {
+  double map_period_s = 5.0;     // [s] of data time between RBPF_MAP messages (0: only at the end)
+  double merge_latency_s = 0.3;  // [s] how long a scan may wait for odometry at or after its time
+  bool no_odometry = false;      // scan matching from the last pose, without ODOMETRY
+
+  void AddFlags(CommandLine* cli);
+  std::string Check() const;  // "" or the usage error
+};
+
+class RbpfSlamNode : public LcmNode {
+ public:
+  static constexpr const char* kProgram = "fl-rbpf-slam";
+  static std::vector<ChannelSpec> Inputs();
+  static std::vector<ChannelSpec> Outputs();
+
+  RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOptions& node_options,
+               LcmInterface* lcm, const ChannelMap& channels);
+
+  StatusReporter& status() override { return status_; }
+  std::vector<std::string> RequiredInputs() const override;
+  void Poll() override;
+  void Finish() override;
+  std::string Summary() const override;
+
+  const RbpfSlam& slam() const { return slam_; }
+
+ private:
+  void OnCalibration(const Pose2& T_base_laser);
+  void OnLaser(const bot_core::planar_lidar_t& msg);
+  void RunScan(const LaserScan& scan, const Pose2* odom, const Status& lookup);
+  void PublishGraph(Utime utime);
+
+  RbpfSlamNodeOptions node_options_;
+  LcmInterface* lcm_;
+  std::string ch_laser_, ch_odometry_, ch_calibration_, ch_pose_, ch_factors_, ch_trajectory_,
+      ch_map_;
+  RbpfSlam slam_;
+  ScanOdometrySync sync_;
+  StatusReporter status_;
+  RateLimitedWarning warn_;
+  bool have_calibration_ = false;
+  bool started_ = false;
+  Utime last_map_utime_ = 0, last_utime_ = 0;
+};
+
+}  // namespace fl::rbpf

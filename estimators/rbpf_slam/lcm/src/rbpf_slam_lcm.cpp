@@ -1,0 +1,341 @@
+#include "fusionloc/rbpf_slam/rbpf_slam_lcm.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/geometry.hpp"
+#include "fusionloc/status_t.hpp"
+#include "fusionloc/stereo_calibration_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
+
+namespace fl::rbpf {
+
+// ---- conversions ----
+LaserScan ScanFromLcm(const bot_core::planar_lidar_t& m) {
+  LaserScan s;
+  s.utime = m.utime;
+  s.ranges = m.ranges;
+  s.rad0 = m.rad0;
+  s.radstep = m.radstep;
+  return s;
+}
+
+bot_core::pose_t PoseToLcm(Utime utime, const Pose2& p) {
+  bot_core::pose_t m{};
+  m.utime = utime;
+  double trans[3], quat[4];
+  IsometryToArrays(p.ToIsometry3(), trans, quat);
+  for (int i = 0; i < 3; ++i) m.pos[i] = trans[i];
+  for (int i = 0; i < 4; ++i) m.orientation[i] = quat[i];
+  return m;
+}
+
+fusionloc::relative_pose_factor_t FactorToLcm(const KeyframeFactor& f) {
+  fusionloc::relative_pose_factor_t m{};
+  m.utime_i = f.utime_i;
+  m.utime_j = f.utime_j;
+  double trans[3], quat[4];
+  IsometryToArrays(f.T_i_j.ToIsometry3(), trans, quat);
+  for (int i = 0; i < 3; ++i) m.trans[i] = trans[i];
+  for (int i = 0; i < 4; ++i) m.quat[i] = quat[i];
+  const int idx[3] = {0, 1, 5};  // x, y, yaw rows/cols of the 6x6 information
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) m.information[idx[r] * 6 + idx[c]] = f.information(r, c);
+  }
+  m.source = fusionloc::relative_pose_factor_t::SOURCE_LASER;
+  m.is_loop_closure = f.is_loop_closure;
+  m.keyframe_id_i = f.keyframe_i;
+  m.keyframe_id_j = f.keyframe_j;
+  return m;
+}
+
+fusionloc::trajectory_t TrajectoryToLcm(Utime utime, const std::vector<StampedPose2>& poses) {
+  fusionloc::trajectory_t m{};
+  m.utime = utime;
+  m.num_poses = static_cast<int32_t>(poses.size());
+  for (const auto& p : poses) {
+    m.utimes.push_back(p.utime);
+    m.x.push_back(p.T_world_base.x);
+    m.y.push_back(p.T_world_base.y);
+    m.z.push_back(0.0);
+    m.theta.push_back(p.T_world_base.theta);
+  }
+  return m;
+}
+
+fusionloc::occupancy_grid_t GridToLcm(Utime utime, const TiledGrid& g) {
+  fusionloc::occupancy_grid_t m{};
+  m.utime = utime;
+  m.resolution = g.resolution();
+  int x0, y0, x1, y1;
+  if (!g.Bounds(&x0, &y0, &x1, &y1)) return m;
+  m.width = x1 - x0;
+  m.height = y1 - y0;
+  m.origin_x = x0 * g.resolution();
+  m.origin_y = y0 * g.resolution();
+  m.num_cells = m.width * m.height;
+  m.cells.resize(static_cast<size_t>(m.num_cells));
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      const float l = g.LogOdds(x, y);
+      int8_t v = -1;
+      if (l != 0.0f) v = static_cast<int8_t>(std::lround(100.0 / (1.0 + std::exp(-l))));
+      m.cells[static_cast<size_t>(y - y0) * m.width + (x - x0)] = v;
+    }
+  }
+  return m;
+}
+
+// ---- scan/odometry synchronisation ----
+ScanOdometrySync::ScanOdometrySync(double merge_latency_s, bool use_odometry)
+    : use_odometry_(use_odometry),
+      max_wait_us_(SecondsToUtime(merge_latency_s)),
+      merger_(SecondsToUtime(merge_latency_s)) {
+  laser_stream_ = merger_.AddStream(channels::kLaser);
+  if (use_odometry_) odom_stream_ = merger_.AddStream(channels::kOdometry);
+}
+
+Status ScanOdometrySync::PushScan(LaserScan scan) {
+  const Utime t = scan.utime;
+  return merger_.Push(laser_stream_, t, Input(std::move(scan)));
+}
+
+Status ScanOdometrySync::PushOdometry(Utime utime, const Pose2& odom) {
+  if (!use_odometry_) return Status::Ok();
+  return merger_.Push(odom_stream_, utime, Input(odom));
+}
+
+void ScanOdometrySync::Process(bool flush, const OnScan& on_scan,
+                               const std::function<void(const std::string&)>& warn) {
+  if (flush) merger_.Flush();
+  auto hand_on = [&](const LaserScan& scan) {
+    if (!use_odometry_) {
+      on_scan(scan, nullptr, Status::Ok());
+      return;
+    }
+    Pose2 odom;
+    const Status st = odom_buffer_.Lookup(scan.utime, &odom);
+    on_scan(scan, st.ok() ? &odom : nullptr, st);
+  };
+  // Scans wait in pending_ until odometry at or after their time has been buffered (the merger
+  // releases a scan once the odometry stream has *sent* a later sample, which may still be
+  // queued behind it).
+  StreamMerger<Input>::Item item;
+  Utime newest = 0;
+  while (merger_.Pop(&item)) {
+    newest = std::max(newest, item.utime);
+    if (const Pose2* odom = std::get_if<Pose2>(&item.value)) {
+      const Status st = odom_buffer_.Add(item.utime, *odom);
+      if (!st.ok()) warn("ODOMETRY: " + st.message());
+    } else {
+      pending_.push_back(std::move(std::get<LaserScan>(item.value)));
+    }
+    while (!pending_.empty() &&
+           (!use_odometry_ ||
+            (!odom_buffer_.empty() && odom_buffer_.newest() >= pending_.front().utime) ||
+            newest - pending_.front().utime > max_wait_us_)) {
+      const LaserScan scan = std::move(pending_.front());
+      pending_.pop_front();
+      hand_on(scan);
+    }
+  }
+  if (flush) {
+    while (!pending_.empty()) {
+      const LaserScan scan = std::move(pending_.front());
+      pending_.pop_front();
+      hand_on(scan);
+    }
+  }
+}
+
+// ---- the node ----
+void RbpfSlamNodeOptions::AddFlags(CommandLine* cli) {
+  cli->AddFlag("map-period-s", &map_period_s,
+               "publish RBPF_MAP every this many seconds of data time (0: only at the end)");
+  cli->AddFlag("merge-latency-s", &merge_latency_s,
+               "how long a scan may wait for odometry at or after its time [s]");
+  cli->AddFlag("no-odometry", &no_odometry,
+               "run without wheel odometry (scan matching from the last pose)");
+  cli->AddCheck([this] { return Check(); });
+}
+
+std::string RbpfSlamNodeOptions::Check() const {
+  if (!(map_period_s >= 0.0)) return "--map-period-s must be >= 0";
+  if (!(merge_latency_s > 0.0)) return "--merge-latency-s must be > 0";
+  return "";
+}
+
+std::vector<ChannelSpec> RbpfSlamNode::Inputs() {
+  return {{channels::kLaser, "bot_core.planar_lidar_t", "laser scans (required)"},
+          {channels::kOdometry, "fusionloc.wheel_odometry_t",
+           "wheel odometry, interpolated at each scan (required unless --no-odometry)"},
+          {channels::kStereoCalibration, "fusionloc.stereo_calibration_t",
+           "T_base_laser, read before the first scan (identity if absent)"}};
+}
+
+std::vector<ChannelSpec> RbpfSlamNode::Outputs() {
+  return {{channels::kRbpfPose, "bot_core.pose_t", "T_world_base at every scan"},
+          {channels::kRbpfFactors, "fusionloc.relative_pose_factor_t",
+           "ICP keyframe factors (base frame; information in x, y, yaw)"},
+          {channels::kRbpfTrajectory, "fusionloc.trajectory_t",
+           "keyframe poses, when the pose graph changes and at the end"},
+          {channels::kRbpfMap, "fusionloc.occupancy_grid_t",
+           "occupancy grid, every --map-period-s and at the end"}};
+}
+
+RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOptions& node_options,
+                           LcmInterface* lcm, const ChannelMap& channels)
+    : node_options_(node_options),
+      lcm_(lcm),
+      ch_laser_(channels(channels::kLaser)),
+      ch_odometry_(channels(channels::kOdometry)),
+      ch_calibration_(channels(channels::kStereoCalibration)),
+      ch_pose_(channels(channels::kRbpfPose)),
+      ch_factors_(channels(channels::kRbpfFactors)),
+      ch_trajectory_(channels(channels::kRbpfTrajectory)),
+      ch_map_(channels(channels::kRbpfMap)),
+      slam_(options),
+      sync_(node_options.merge_latency_s, !node_options.no_odometry),
+      status_(lcm, kProgram) {
+  lcm_->Subscribe<fusionloc::stereo_calibration_t>(
+      ch_calibration_, [this](const fusionloc::stereo_calibration_t& m, const std::string&) {
+        OnCalibration(
+            Pose2::FromIsometry3(IsometryFromArrays(m.T_base_laser.trans, m.T_base_laser.quat)));
+      });
+  lcm_->Subscribe<bot_core::planar_lidar_t>(
+      ch_laser_, [this](const bot_core::planar_lidar_t& m, const std::string&) { OnLaser(m); });
+  if (!node_options_.no_odometry) {
+    lcm_->Subscribe<fusionloc::wheel_odometry_t>(
+        ch_odometry_, [this](const fusionloc::wheel_odometry_t& m, const std::string&) {
+          const Status st = sync_.PushOdometry(m.utime, Pose2(m.x, m.y, m.theta));
+          if (!st.ok()) warn_.Warn(st.message());
+        });
+  }
+  status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_laser_);
+}
+
+std::vector<std::string> RbpfSlamNode::RequiredInputs() const {
+  if (node_options_.no_odometry) return {ch_laser_};
+  return {ch_laser_, ch_odometry_};
+}
+
+void RbpfSlamNode::OnCalibration(const Pose2& T) {
+  if (started_) {
+    if (!have_calibration_) {
+      warn_.Warn(ch_calibration_ +
+                 " arrived after the first scan; T_base_laser ignored (identity used)");
+    }
+    return;
+  }
+  const Status s = slam_.SetBaseLaser(T);
+  if (!s.ok()) {
+    warn_.Warn(ch_calibration_ + ": " + s.message());
+    return;
+  }
+  if (!have_calibration_) {
+    FL_LOG(INFO) << "T_base_laser from " << ch_calibration_ << ": x " << T.x << " y " << T.y
+                 << " yaw " << T.theta;
+  }
+  have_calibration_ = true;
+}
+
+void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
+  status_.CountIn();
+  const Status st = sync_.PushScan(ScanFromLcm(m));
+  if (!st.ok()) {
+    status_.CountDropped(st.message());
+    warn_.Warn(st.message());
+  }
+}
+
+void RbpfSlamNode::Poll() {
+  sync_.Process(
+      false,
+      [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+        RunScan(scan, odom, lookup);
+      },
+      [this](const std::string& w) { warn_.Warn(w); });
+}
+
+void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const Status& lookup) {
+  Pose2 odom;
+  if (!node_options_.no_odometry) {
+    if (!odom_in) {
+      status_.CountDropped("LASER: " + lookup.message());
+      warn_.Warn("LASER scan dropped: " + lookup.message());
+      return;
+    }
+    odom = *odom_in;
+  } else {
+    odom = slam_.stats().scans == 0 ? Pose2() : slam_.CurrentPose();
+  }
+  const Utime t0 = MonotonicUtime();
+  ScanResult r;
+  const Status st = slam_.AddScan(scan, odom, &r);
+  status_.AddItemTime(static_cast<double>(MonotonicUtime() - t0) * 1e-3);
+  if (!st.ok()) {
+    status_.CountDropped("LASER: " + st.message());
+    warn_.Warn(st.message());
+    return;
+  }
+  started_ = true;
+  last_utime_ = scan.utime;
+  lcm_->Publish(ch_pose_, PoseToLcm(scan.utime, r.T_world_base), scan.utime);
+  status_.CountOut();
+  for (const auto& f : r.factors) lcm_->Publish(ch_factors_, FactorToLcm(f), scan.utime);
+  if (r.graph_changed) PublishGraph(scan.utime);
+  if (r.odometry_jump) {
+    warn_.Warn("odometry jump at utime " + std::to_string(scan.utime) +
+               " flagged; step not trusted");
+  }
+  if (node_options_.map_period_s > 0 &&
+      scan.utime - last_map_utime_ >= SecondsToUtime(node_options_.map_period_s)) {
+    lcm_->Publish(ch_map_, GridToLcm(scan.utime, slam_.BestMap()), scan.utime);
+    last_map_utime_ = scan.utime;
+  }
+  const auto& s = slam_.stats();
+  status_.Set("particles", slam_.num_particles());
+  status_.Set("neff", r.neff);
+  status_.Set("keyframes", static_cast<double>(s.keyframes));
+  status_.Set("loop_closures", static_cast<double>(s.loop_closures));
+  status_.Set("divergences", static_cast<double>(s.divergences));
+  status_.Set("recoveries", static_cast<double>(s.recoveries));
+  status_.Set("skipped_fast_turn", static_cast<double>(s.skipped_fast_turn));
+  status_.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
+  status_.Set("invalid_beams", static_cast<double>(s.invalid_beams));
+  status_.SetState(fusionloc::status_t::LEVEL_OK, "running");
+}
+
+void RbpfSlamNode::PublishGraph(Utime utime) {
+  lcm_->Publish(ch_trajectory_, TrajectoryToLcm(utime, slam_.KeyframePoses()), utime);
+}
+
+void RbpfSlamNode::Finish() {
+  sync_.Process(
+      true,
+      [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+        RunScan(scan, odom, lookup);
+      },
+      [this](const std::string& w) { warn_.Warn(w); });
+  slam_.Finish();
+  if (started_) {
+    PublishGraph(last_utime_);
+    lcm_->Publish(ch_map_, GridToLcm(last_utime_, slam_.BestMap()), last_utime_);
+  }
+}
+
+std::string RbpfSlamNode::Summary() const {
+  const auto& s = slam_.stats();
+  return "scans " + std::to_string(s.scans) + ", processed " + std::to_string(s.processed) +
+         ", keyframes " + std::to_string(s.keyframes) + ", loop closures " +
+         std::to_string(s.loop_closures) + " (of " + std::to_string(s.loop_candidates) +
+         " candidates), divergences caught " + std::to_string(s.divergences) +
+         ", lost-track recoveries " + std::to_string(s.recoveries) +
+         ", scans held back in fast turns " + std::to_string(s.skipped_fast_turn) +
+         ", dropped (time) " + std::to_string(s.dropped_time_backwards) + ", rejected " +
+         std::to_string(s.rejected_bad_scan) + ", odometry jumps " +
+         std::to_string(s.odometry_jumps);
+}
+
+}  // namespace fl::rbpf

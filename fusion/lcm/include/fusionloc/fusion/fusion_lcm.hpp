@@ -1,0 +1,94 @@
+// The fusion's LCM adapter (target fl_fusion_lcm; the fusion library has no LCM): message
+// conversions and FusionNode, which fl-fusion and fl-replay run.
+//
+// In:  RBPF_POSE (laser-rate nodes), RBPF_FACTORS and VO_FACTORS (between-factors), ODOMETRY,
+//      VO_POINTS (keyframe points for the 3D map), STEREO_CALIBRATION (T_base_camera).
+// Out: FUSED_POSE (at the laser rate), FUSED_TRAJECTORY (when it changes), FUSED_MAP (on exit
+//      and on request), STATUS_FL_FUSION.
+// Live, the full solve (loop closure / periodic) runs on a worker thread while fused poses
+// keep flowing; replaying a log it runs inline, so that the output is reproducible.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <future>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bot_core/pose_t.hpp"
+#include "fusionloc/common/lcm_process.hpp"
+#include "fusionloc/fusion/fusion_config.hpp"
+#include "fusionloc/point_cloud_t.hpp"
+#include "fusionloc/relative_pose_factor_t.hpp"
+#include "fusionloc/stereo_calibration_t.hpp"
+#include "fusionloc/trajectory_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
+
+namespace fl::fusion {
+
+// ---- conversions ----
+// The factor of a message; false with `error` for an unknown source or a non-unit quaternion.
+bool FactorFromLcm(const fusionloc::relative_pose_factor_t& msg, RelativePoseFactor* factor,
+                   std::string* error);
+fusionloc::trajectory_t TrajectoryToLcm(const std::vector<TrajectoryPoint>& trajectory,
+                                        Utime utime);
+
+// ---- the node ----
+struct FusionNodeOptions {
+  std::string map_out = "out/fusion/map";  // prefix of the saved map: .pcd and _top.png ("": none)
+  bool sync_full_solve = false;            // full solves inline (always so replaying a log)
+
+  void AddFlags(CommandLine* cli);
+};
+
+class FusionNode : public LcmNode {
+ public:
+  static constexpr const char* kProgram = "fl-fusion";
+  static std::vector<ChannelSpec> Inputs();
+  static std::vector<ChannelSpec> Outputs();
+  // Asks every FusionNode to save its map at its next Poll() (async-signal-safe: SIGUSR1).
+  static void RequestMapSave();
+
+  FusionNode(const FusionProcessConfig& config, const FusionNodeOptions& node_options,
+             LcmInterface* lcm, const ChannelMap& channels);
+  ~FusionNode() override;
+
+  StatusReporter& status() override { return status_; }
+  std::vector<std::string> RequiredInputs() const override { return {ch_rbpf_pose_}; }
+  void Poll() override;
+  void Finish() override;
+  std::string Summary() const override;
+
+  const FactorGraphFusion& fusion() const { return fusion_; }
+
+ private:
+  void OnLaserPose(const bot_core::pose_t& m);
+  void OnFactor(const fusionloc::relative_pose_factor_t& m, const std::string& channel);
+  void OnOdometry(const fusionloc::wheel_odometry_t& m);
+  void OnPoints(const fusionloc::point_cloud_t& m);
+  void PublishPose();
+  void PublishTrajectory(Utime utime);
+  void StartFullSolve();
+  void FinishFullSolve();
+  void SaveMap();
+
+  FusionProcessConfig config_;
+  FusionNodeOptions node_options_;
+  LcmInterface* lcm_;
+  bool async_;
+  bool with_time_;  // wall-clock times in what is published (live only)
+  std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_calib_, ch_pose_, ch_trajectory_, ch_map_;
+  FactorGraphFusion fusion_;
+  PointMap map_;
+  StatusReporter status_;
+  Eigen::Isometry3d T_base_camera_ = Eigen::Isometry3d::Identity();
+  bool have_calibration_ = false;
+  std::unique_ptr<FullSolveJob> job_;
+  std::future<void> job_future_;
+  SolveSummary last_full_;
+  Utime last_utime_ = 0;
+  Utime last_trajectory_utime_ = 0;
+  RateLimitedWarning bad_factor_warning_;
+};
+
+}  // namespace fl::fusion
