@@ -11,6 +11,18 @@ cmds=$(sed -n '/^main()/,/^}/p' "$ROOT/fusionloc" | grep -oE '^\s+[a-z|-]+\)' | 
 for c in $cmds; do
   echo "$help" | grep -qE "^  $c( |$)" || fail "subcommand '$c' is not explained in --help"
 done
+# `./fusionloc CMD --help` prints that command's help and exits 0 without building anything
+# (an empty build folder stays empty) or starting anything.
+empty=$(mktemp -d)
+for c in $cmds; do
+  [ "$c" = help ] && continue
+  out=$(FL_BUILD_DIR="$empty/build" "$ROOT/fusionloc" "$c" --help 2>&1) || fail "'$c --help' exited non-zero: $out"
+  echo "$out" | grep -qE "^  $c( |$)" || fail "'$c --help' does not show its help: $out"
+  [ ! -e "$empty/build" ] || fail "'$c --help' started a build"
+done
+out=$(FL_BUILD_DIR="$empty/build" "$ROOT/fusionloc" bench laser --help 2>&1) || fail "'bench laser --help' exited non-zero"
+echo "$out" | grep -q "laser" || fail "'bench --help' does not list the benchmarks: $out"
+rm -rf "$empty"
 out=$("$ROOT/fusionloc" no-such-command 2>&1) && fail "unknown command exited 0"
 echo "$out" | grep -q "unknown command 'no-such-command'" || fail "no clear error for an unknown command: $out"
 out=$("$ROOT/fusionloc" build --bogus 2>&1) && fail "bad build option exited 0"
