@@ -185,10 +185,17 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
     return Initialize(std::move(cur), std::move(result), t_start);
   }
 
-  // ---- temporal matching, quadrilateral check, RANSAC + SVD against the last good frame ----
+  return Track(std::move(cur), std::move(result), t_start);
+}
+
+// Motion against the last good frame: temporal matching, quadrilateral check, RANSAC + SVD (the
+// retry loop of SearchMotion), refinement; then the pose chain, tracks and keyframe decision.
+StereoVoResult StereoVo::Track(std::unique_ptr<stages::StereoFrame> cur, StereoVoResult result,
+                               double t_start) {
   const stages::StereoFrame& prev = *last_good_;
+  const Utime utime = cur->utime;
   const double dt_s = static_cast<double>(utime - prev.utime) * 1e-6;
-  t0 = NowMs();
+  double t0 = NowMs();
   const stages::FrameMatch match =
       stages::SearchMotion(camera_, prev, *cur, stages::VelocityPredicts(dt_s, velocity_dt_s_),
                            T_prev_velocity_, offset_px_, options_);
@@ -241,15 +248,10 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
 
   // ---- accept: disparity offset filter, pose chain, tracks, keyframe decision ----
   UpdateOffset(refined.last, offset_pred_var, utime, &result);
-  T_world_camera_ = T_world_camera_ * T_a_b;
-  T_prev_velocity_ = T_a_b;
-  velocity_dt_s_ = dt_s;
-  result.T_prev_camera = T_a_b;
+  AdvancePose(refined, dt_s, &result);
   const int tracked_from_keyframe =
       stages::PropagateTracks(prev, match, refined.inliers, keyframe_max_track_id_, cur.get());
   stages::AssignNewTracks(cur.get(), &next_track_id_);
-  cov_kf_camera_ = ComposeCovariance(cov_kf_camera_, T_a_b, refined.covariance);
-  T_kf_camera_ = T_kf_camera_ * T_a_b;
   AddKeyframeFactorIfDue(*cur, tracked_from_keyframe, &result);
   result.state = TrackingState::kTracked;
   std::ostringstream msg;
@@ -340,6 +342,17 @@ void StereoVo::UpdateOffset(const RefineResult& refined, double predicted_varian
     offset_var_px2_ =
         options_.disparity_offset_initial_sd_px * options_.disparity_offset_initial_sd_px;
   }
+}
+
+// The frame-to-frame motion onto the world pose, the velocity and the keyframe chain.
+void StereoVo::AdvancePose(const stages::Refinement& refined, double dt_s, StereoVoResult* result) {
+  const Eigen::Isometry3d& T_a_b = refined.T_a_b;
+  T_world_camera_ = T_world_camera_ * T_a_b;
+  T_prev_velocity_ = T_a_b;
+  velocity_dt_s_ = dt_s;
+  result->T_prev_camera = T_a_b;
+  cov_kf_camera_ = ComposeCovariance(cov_kf_camera_, T_a_b, refined.covariance);
+  T_kf_camera_ = T_kf_camera_ * T_a_b;
 }
 
 void StereoVo::AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int tracked_from_keyframe,

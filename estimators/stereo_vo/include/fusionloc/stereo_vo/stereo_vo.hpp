@@ -27,6 +27,7 @@
 namespace fl::vo {
 namespace stages {
 struct StereoFrame;  // stereo_vo_stages.hpp
+struct Refinement;
 }  // namespace stages
 
 // Calibration of a rectified stereo rig (the library's own plain struct).
@@ -185,7 +186,10 @@ class StereoVo {
   StereoVoResult Finish(StereoVoResult result, double t_start) const;
   StereoVoResult Initialize(std::unique_ptr<stages::StereoFrame> frame, StereoVoResult result,
                             double t_start);
+  StereoVoResult Track(std::unique_ptr<stages::StereoFrame> cur, StereoVoResult result,
+                       double t_start);
   void StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* result);
+  void AdvancePose(const stages::Refinement& refined, double dt_s, StereoVoResult* result);
   double PredictedOffsetVariance(Utime utime) const;
   void UpdateOffset(const RefineResult& refined, double predicted_variance, Utime utime,
                     StereoVoResult* result);
