@@ -37,6 +37,22 @@ class StereoVoStagesTest : public ::testing::Test {
     MatchStereoFrame(options_, &f);
     return f;
   }
+  // A textureless pair: no features, nothing to match.
+  StereoFrame FlatFrame() {
+    StereoFrame f;
+    f.left = cv::Mat(calib_.height, calib_.width, CV_8UC1, cv::Scalar(120));
+    f.right = f.left;
+    DetectFeatures(&extractor_, &f);
+    MatchStereoFrame(options_, &f);
+    return f;
+  }
+  // Quadrilaterals between the plane frames before and after one step (velocity prediction).
+  QuadMatches StepQuads(const StereoFrame& prev, const StereoFrame& cur, TemporalMatches* t) {
+    const TemporalPrediction p =
+        PredictByVelocity(camera_, prev, MakeMotion(0, 0, 0, kStep, 0, 0), options_.matching);
+    *t = MatchTemporalPair(prev, cur, p, options_.matching);
+    return CheckQuadrilaterals(prev, cur, *t, options_.matching);
+  }
   StereoCalibration calib_;
   StereoCamera camera_;
   cv::Mat texture_;
@@ -162,19 +178,17 @@ TEST_F(StereoVoStagesTest, PredictByVelocityMovesThePointsByTheKnownMotion) {
   ASSERT_EQ(p.left.size(), static_cast<size_t>(prev.fl.size()));
   ASSERT_EQ(p.right.size(), static_cast<size_t>(prev.fr.size()));
   const double flow = calib_.fx * kStep / kDepth;  // 5 px to the left
-  int n = 0;
-  EXPECT_GT(
-      FractionNear(
-          p.left, [&](size_t i) { return prev.fl.keypoints[i].pt - cv::Point2f(float(flow), 0); },
-          0.3, &n),
-      0.95);
-  EXPECT_EQ(n, prev.stereo_matches);
-  EXPECT_GT(
-      FractionNear(
-          p.right, [&](size_t j) { return prev.fr.keypoints[j].pt - cv::Point2f(float(flow), 0); },
-          0.3, &n),
-      0.95);
-  EXPECT_EQ(n, prev.stereo_matches);
+  // Both images: every stereo feature predicted, nearly all at the known flow.
+  for (const auto& [pred, features] :
+       {std::make_pair(&p.left, &prev.fl), std::make_pair(&p.right, &prev.fr)}) {
+    int n = 0;
+    const Features* f = features;
+    const auto moved = [f, flow](size_t i) {
+      return f->keypoints[i].pt - cv::Point2f(static_cast<float>(flow), 0);
+    };
+    EXPECT_GT(FractionNear(*pred, moved, 0.3, &n), 0.95);
+    EXPECT_EQ(n, prev.stereo_matches);
+  }
 }
 
 TEST_F(StereoVoStagesTest, GlobalShiftIsTheMedianImageMotion) {
@@ -193,10 +207,7 @@ TEST_F(StereoVoStagesTest, GlobalShiftIsTheMedianImageMotion) {
             1.0);
   EXPECT_EQ(n, prev.stereo_matches);
   // Nothing to match: no shift, the wide window.
-  StereoFrame empty;
-  empty.left = cv::Mat(calib_.height, calib_.width, CV_8UC1, cv::Scalar(120));
-  empty.right = empty.left;
-  DetectFeatures(&extractor_, &empty);
+  const StereoFrame empty = FlatFrame();
   const GlobalShift none = EstimateGlobalShift(prev, empty, options_.matching);
   EXPECT_FALSE(none.found);
   EXPECT_EQ(PredictByShift(prev, none, options_.matching).radius_px,
@@ -205,9 +216,8 @@ TEST_F(StereoVoStagesTest, GlobalShiftIsTheMedianImageMotion) {
 
 TEST_F(StereoVoStagesTest, TemporalMatchesAndQuadrilateralsFollowTheKnownMotion) {
   const StereoFrame prev = PlaneFrame(0.0), cur = PlaneFrame(kStep);
-  const TemporalPrediction p =
-      PredictByVelocity(camera_, prev, MakeMotion(0, 0, 0, kStep, 0, 0), options_.matching);
-  const TemporalMatches t = MatchTemporalPair(prev, cur, p, options_.matching);
+  TemporalMatches t;
+  const QuadMatches q = StepQuads(prev, cur, &t);
   ASSERT_EQ(t.left.size(), static_cast<size_t>(prev.fl.size()));
   ASSERT_EQ(t.right.size(), static_cast<size_t>(prev.fr.size()));
   int n = 0, good = 0;
@@ -221,7 +231,6 @@ TEST_F(StereoVoStagesTest, TemporalMatchesAndQuadrilateralsFollowTheKnownMotion)
   EXPECT_GT(n, 150);
   EXPECT_GT(good, n * 95 / 100) << good << " of " << n;
 
-  const QuadMatches q = CheckQuadrilaterals(prev, cur, t, options_.matching);
   EXPECT_GT(q.quads.size(), 150u);
   EXPECT_EQ(q.stats.kept, static_cast<int>(q.quads.size()));
   EXPECT_EQ(q.stats.candidates, prev.stereo_matches);
@@ -236,10 +245,8 @@ TEST_F(StereoVoStagesTest, TemporalMatchesAndQuadrilateralsFollowTheKnownMotion)
 
 TEST_F(StereoVoStagesTest, CorrespondencesTriangulateTheKnownDepthAndMotion) {
   const StereoFrame prev = PlaneFrame(0.0), cur = PlaneFrame(kStep);
-  const TemporalPrediction p =
-      PredictByVelocity(camera_, prev, MakeMotion(0, 0, 0, kStep, 0, 0), options_.matching);
-  const QuadMatches q = CheckQuadrilaterals(
-      prev, cur, MatchTemporalPair(prev, cur, p, options_.matching), options_.matching);
+  TemporalMatches t;
+  const QuadMatches q = StepQuads(prev, cur, &t);
   const Correspondences c = BuildCorrespondences(camera_, prev, cur, q.quads, 0.0);
   ASSERT_EQ(c.corr.size(), c.quad.size());
   EXPECT_EQ(c.corr.size(), q.quads.size());  // all disparities positive
@@ -288,11 +295,7 @@ TEST_F(StereoVoStagesTest, SearchMotionFindsTheMotionAndRetriesAfterABadPredicti
   EXPECT_EQ(m.attempt, 1);
   EXPECT_LT((m.ransac.T_a_b.translation() - truth.translation()).norm(), 0.005);
   // Nothing to match: no motion, no RANSAC run.
-  StereoFrame empty;
-  empty.left = cv::Mat(calib_.height, calib_.width, CV_8UC1, cv::Scalar(120));
-  empty.right = empty.left;
-  DetectFeatures(&extractor_, &empty);
-  MatchStereoFrame(options_, &empty);
+  const StereoFrame empty = FlatFrame();
   m = SearchMotion(camera_, prev, empty, true, truth, 0.0, options_);
   EXPECT_FALSE(m.ransac.ok);
   EXPECT_EQ(m.ransac.iterations, 0);
