@@ -1,6 +1,7 @@
 // Synthetic stereo data for the stereo VO tests: a calibration, textured images of a
-// fronto-parallel plane at a known disparity (exact sub-pixel shifts), and 3D-3D
-// correspondences from random points seen by a virtual rig under a known motion.
+// fronto-parallel plane at a known disparity (exact sub-pixel shifts), squares with known
+// corners, and 3D-3D correspondences from random points seen by a virtual rig under a known
+// motion.
 #pragma once
 
 #include <Eigen/Geometry>
@@ -61,6 +62,29 @@ inline cv::Mat View(const cv::Mat& texture, double offset_x, double offset_y, in
   cv::warpAffine(texture, out, m, cv::Size(width, height), cv::INTER_LINEAR,
                  cv::BORDER_REFLECT_101);
   return out;
+}
+
+// Dark squares of side_px on a light background, one per spacing_px grid cell (first at
+// (spacing_px, spacing_px)), all moved by shift_x pixels; *corners gets the four corner pixels of
+// every square, the only corners of the image (a straight edge is no FAST corner).
+inline cv::Mat Squares(int width, int height, int side_px, int spacing_px, int shift_x,
+                       std::vector<cv::Point2f>* corners) {
+  cv::Mat img(height, width, CV_8UC1, cv::Scalar(200));
+  corners->clear();
+  for (int y = spacing_px; y + side_px + spacing_px <= height; y += spacing_px) {
+    for (int x = spacing_px; x + side_px + spacing_px <= width; x += spacing_px) {
+      const int x0 = x + shift_x, x1 = x0 + side_px - 1, y1 = y + side_px - 1;
+      cv::rectangle(img, cv::Point(x0, y), cv::Point(x1, y1), cv::Scalar(50), cv::FILLED);
+      for (const cv::Point2f c :
+           {cv::Point2f(x0, y), cv::Point2f(x1, y), cv::Point2f(x0, y1), cv::Point2f(x1, y1)}) {
+        corners->push_back(c);
+      }
+    }
+  }
+  // Blurred edges: FAST scores peak at the corners (sharp ones tie, and non-maximum
+  // suppression would drop them all); the detections lie about 1 px inside each corner.
+  cv::GaussianBlur(img, img, cv::Size(5, 5), 1.0);
+  return img;
 }
 
 // Stereo pair of a plane at depth z seen from camera x position cam_x (camera frame, metres):

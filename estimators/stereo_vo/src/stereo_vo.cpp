@@ -3,11 +3,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <stdexcept>
 
-#include "fusionloc/common/geometry.hpp"
+#include "fusionloc/stereo_vo/stereo_vo_stages.hpp"
 
 namespace fl::vo {
 namespace {
@@ -18,19 +17,10 @@ double NowMs() {
       .count();
 }
 
-std::string SizeText(const cv::Mat& m) {
-  return std::to_string(m.cols) + "x" + std::to_string(m.rows);
-}
-
-// 8-bit gray view or conversion of an 8-bit 1/3/4-channel image; empty if unsupported.
-cv::Mat ToGray(const cv::Mat& image) {
-  if (image.depth() != CV_8U) return {};
-  if (image.channels() == 1) return image;
-  cv::Mat gray;
-  if (image.channels() == 3) cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
-  if (image.channels() == 4) cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY);
-  return gray;
-}
+// Disparity offset prior: the filter's prediction (random walk since its last update), its
+// variance halved because every frame's observations enter two frame pairs; the update counts
+// the data's information kReuse times likewise.
+constexpr double kReuse = 0.5;
 
 }  // namespace
 
@@ -132,16 +122,6 @@ fl::Status StereoVoOptions::Validate() const {
   return fl::Status::Ok();
 }
 
-struct StereoVo::Frame {
-  Utime utime = 0;
-  cv::Mat left, right;         // gray
-  std::vector<float> right_x;  // per left feature with a stereo match: right x [px]
-  Features fl, fr;
-  std::vector<int> stereo;        // left -> right
-  std::vector<int64_t> track_id;  // per left feature with a stereo match, else -1
-  int stereo_matches = 0;
-};
-
 StereoVo::StereoVo(const StereoVoOptions& options, const StereoCalibration& calibration)
     : options_(options),
       calibration_(calibration),
@@ -159,428 +139,120 @@ StereoVo::StereoVo(const StereoVoOptions& options, const StereoCalibration& cali
 
 StereoVo::~StereoVo() = default;
 
-// Sub-pixel disparity: the right position of each stereo match by Lucas-Kanade alignment of
-// the left patch (at the detected left corner) in the right image. The left corners stay as
-// detected: aligning patches across time would be biased by the scale change of forward
-// motion (features appear to move too far), which makes the motion too long. Matches whose
-// alignment fails, moves more than subpixel_max_shift_px or leaves the row are dropped.
-int StereoVo::RefineStereo(Frame* f) const {
-  f->right_x.assign(f->stereo.size(), -1.0f);
-  const bool subpixel = options_.subpixel_refinement;
-  const int half = options_.subpixel_window_px / 2;
-  const float max_shift = static_cast<float>(options_.subpixel_max_shift_px);
-  int dropped = 0;
-  for (size_t i = 0; i < f->stereo.size(); ++i) {
-    const int j = f->stereo[i];
-    if (j < 0) continue;
-    const cv::Point2f pl = f->fl.keypoints[i].pt;
-    const cv::Point2f pr = f->fr.keypoints[static_cast<size_t>(j)].pt;
-    if (!subpixel) {
-      f->right_x[i] = pr.x;
-      continue;
-    }
-    cv::Point2f refined = pr;
-    if (!AlignPatch(f->left, pl, f->right, half, &refined) ||
-        std::abs(refined.x - pr.x) > max_shift || std::abs(refined.y - pl.y) > 1.0f ||
-        !(pl.x - refined.x > 0)) {
-      f->stereo[i] = -1;
-      ++dropped;
-      continue;
-    }
-    f->right_x[i] = refined.x;
-  }
-  return dropped;
-}
-
 StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
                                         const cv::Mat& right_in) {
   const double t_start = NowMs();
   StereoVoResult result;
   result.utime = utime;
   result.segment = segment_;
-  const Eigen::Isometry3d T_camera_base = calibration_.T_base_camera.inverse();
-  auto fill_pose = [&]() {
-    result.pose_valid = initialized_;
-    result.T_world_camera = T_world_camera_;
-    result.T_world_base = T_world_camera_ * T_camera_base;
-    result.stats.disparity_offset_px = offset_px_;
-    result.stats.disparity_offset_sd_px = std::sqrt(offset_var_px2_);
-    result.stats.ms_total = NowMs() - t_start;
-  };
-  auto reject = [&](TrackingState state, const std::string& why) {
-    result.state = state;
-    result.message = (state == TrackingState::kRejected ? "rejected: " : "not tracked: ") + why;
-    fill_pose();
-    return result;
-  };
-
-  // ---- input checks ----
-  if (left_in.empty() || right_in.empty()) {
-    return reject(TrackingState::kRejected,
-                  std::string(left_in.empty() ? "left" : "right") + " image is empty");
-  }
-  if (left_in.size() != right_in.size() || left_in.cols != calibration_.width ||
-      left_in.rows != calibration_.height) {
-    return reject(TrackingState::kRejected,
-                  "image sizes left " + SizeText(left_in) + ", right " + SizeText(right_in) +
-                      " do not match the calibration " + std::to_string(calibration_.width) + "x" +
-                      std::to_string(calibration_.height) +
-                      "; publish the rectified images the calibration was made for");
-  }
-  const cv::Mat left = ToGray(left_in), right = ToGray(right_in);
-  if (left.empty() || right.empty()) {
-    return reject(TrackingState::kRejected,
-                  "unsupported pixel type (need 8-bit gray, BGR or BGRA)");
-  }
-  if (last_utime_ >= 0 && utime <= last_utime_) {
-    return reject(TrackingState::kRejected,
-                  "time stamp " + std::to_string(utime) + " us is not after the previous " +
-                      std::to_string(last_utime_) + " us (repeated or out of order)");
-  }
-  last_utime_ = utime;
-
-  // ---- image quality ----
-  const double mean_l = cv::mean(left)[0], mean_r = cv::mean(right)[0];
-  if (std::min(mean_l, mean_r) < options_.min_mean_intensity) {
-    return reject(TrackingState::kNotTracked,
-                  "black frame (mean gray " +
-                      std::to_string(static_cast<int>(std::min(mean_l, mean_r))) + ")");
-  }
-  if (std::max(mean_l, mean_r) > options_.max_mean_intensity) {
-    return reject(TrackingState::kNotTracked,
-                  "saturated frame (mean gray " +
-                      std::to_string(static_cast<int>(std::max(mean_l, mean_r))) + ")");
-  }
-
-  // ---- features and stereo matching ----
-  auto cur = std::make_unique<Frame>();
+  auto cur = std::make_unique<stages::StereoFrame>();
   cur->utime = utime;
-  cur->left = left;
-  cur->right = right;
+
+  // ---- input checks, image quality ----
+  std::string why = stages::CheckImages(left_in, right_in, calibration_, &cur->left, &cur->right);
+  if (why.empty()) why = stages::CheckTimeStamp(utime, last_utime_);
+  if (!why.empty()) return Reject(std::move(result), TrackingState::kRejected, why, t_start);
+  last_utime_ = utime;
+  why = stages::CheckExposure(cur->left, cur->right, options_);
+  if (!why.empty()) return Reject(std::move(result), TrackingState::kNotTracked, why, t_start);
+
+  // ---- detection ----
   double t0 = NowMs();
-  extractor_.Extract(left, &cur->fl);
-  extractor_.Extract(right, &cur->fr);
+  stages::DetectFeatures(&extractor_, cur.get());
   result.stats.ms_features = NowMs() - t0;
   result.stats.features_left = cur->fl.size();
   result.stats.features_right = cur->fr.size();
-  if (std::min(cur->fl.size(), cur->fr.size()) < options_.min_features) {
-    return reject(TrackingState::kNotTracked,
-                  "low texture (" + std::to_string(std::min(cur->fl.size(), cur->fr.size())) +
-                      " corners, need " + std::to_string(options_.min_features) + ")");
+  const int corners = std::min(cur->fl.size(), cur->fr.size());
+  if (corners < options_.min_features) {
+    return Reject(std::move(result), TrackingState::kNotTracked,
+                  "low texture (" + std::to_string(corners) + " corners, need " +
+                      std::to_string(options_.min_features) + ")",
+                  t_start);
   }
+
+  // ---- stereo matching ----
   t0 = NowMs();
-  cur->stereo = MatchStereo(cur->fl, cur->fr, options_.matching);
-  result.stats.subpixel_dropped = RefineStereo(cur.get());
-  cur->track_id.assign(cur->stereo.size(), -1);
-  for (int j : cur->stereo) cur->stereo_matches += j >= 0 ? 1 : 0;
+  result.stats.subpixel_dropped = stages::MatchStereoFrame(options_, cur.get());
   result.stats.stereo_matches = cur->stereo_matches;
   result.stats.ms_matching = NowMs() - t0;
   if (cur->stereo_matches < options_.min_quads) {
-    return reject(TrackingState::kNotTracked,
-                  "too few stereo matches (" + std::to_string(cur->stereo_matches) + ")");
+    return Reject(std::move(result), TrackingState::kNotTracked,
+                  "too few stereo matches (" + std::to_string(cur->stereo_matches) + ")", t_start);
   }
-
-  auto make_keyframe = [&](Frame* f) {
-    result.is_keyframe = true;
-    result.keyframe_id = next_keyframe_id_;
-    keyframe_id_ = next_keyframe_id_++;
-    keyframe_utime_ = f->utime;
-    T_kf_camera_.setIdentity();
-    cov_kf_camera_.setZero();
-    keyframe_max_track_id_ = next_track_id_ - 1;
-    keyframe_tracks_ = f->stereo_matches;
-    result.keyframe_points.reserve(static_cast<size_t>(f->stereo_matches));
-    result.keyframe_intensities.reserve(static_cast<size_t>(f->stereo_matches));
-    for (int i = 0; i < f->fl.size(); ++i) {
-      const int j = f->stereo[static_cast<size_t>(i)];
-      if (j < 0) continue;
-      const cv::Point2f pl = f->fl.keypoints[static_cast<size_t>(i)].pt;
-      const double d =
-          pl.x - CorrectRightX(camera_, f->right_x[static_cast<size_t>(i)], offset_px_);
-      if (!(d > 0)) continue;
-      result.keyframe_points.push_back(camera_.Triangulate(pl.x, pl.y, d).cast<float>());
-      result.keyframe_intensities.push_back(f->left.at<uint8_t>(cvRound(pl.y), cvRound(pl.x)) /
-                                            255.0f);
-    }
-  };
-  auto assign_new_tracks = [&](Frame* f) {
-    for (size_t i = 0; i < f->stereo.size(); ++i) {
-      if (f->stereo[i] >= 0 && f->track_id[i] < 0) f->track_id[i] = next_track_id_++;
-    }
-  };
 
   // ---- first frame, or the first after a gap too long to bridge ----
-  const bool gap_too_long =
-      last_good_ && static_cast<double>(utime - last_good_->utime) * 1e-6 > options_.max_gap_s;
-  if (!last_good_ || gap_too_long) {
-    if (gap_too_long) {
-      ++segment_;
-      result.new_segment = true;
-      result.segment = segment_;
-      result.message =
-          "initialized a new segment: " + std::to_string((utime - last_good_->utime) * 1e-6) +
-          " s since the last tracked frame (max_gap_s " + std::to_string(options_.max_gap_s) +
-          "); the motion across the gap is unknown and no factor links it";
-    } else {
-      result.message = "initialized";
-    }
-    initialized_ = true;
-    velocity_dt_s_ = 0;
-    assign_new_tracks(cur.get());
-    make_keyframe(cur.get());
-    result.state = TrackingState::kInitialized;
-    last_good_ = std::move(cur);
-    fill_pose();
-    return result;
+  if (!last_good_ || static_cast<double>(utime - last_good_->utime) * 1e-6 > options_.max_gap_s) {
+    return Initialize(std::move(cur), std::move(result), t_start);
   }
 
-  // ---- temporal matching and quadrilaterals against the last good frame ----
-  Frame& prev = *last_good_;
+  return Track(std::move(cur), std::move(result), t_start);
+}
+
+// Motion against the last good frame: temporal matching, quadrilateral check, RANSAC + SVD (the
+// retry loop of SearchMotion), refinement; then the pose chain, tracks and keyframe decision.
+StereoVoResult StereoVo::Track(std::unique_ptr<stages::StereoFrame> cur, StereoVoResult result,
+                               double t_start) {
+  const stages::StereoFrame& prev = *last_good_;
+  const Utime utime = cur->utime;
   const double dt_s = static_cast<double>(utime - prev.utime) * 1e-6;
-  t0 = NowMs();
-  const bool can_predict =
-      velocity_dt_s_ > 0 && dt_s / velocity_dt_s_ > 0.75 && dt_s / velocity_dt_s_ < 1.33;
-  std::vector<Quad> quads;
-  QuadStats qstats;
-  std::vector<StereoCorrespondence> corr;
-  std::vector<int> corr_quad;  // correspondence -> quad index
-  RansacResult ransac;
-  std::vector<Quad> best_quads;
-  std::vector<StereoCorrespondence> best_corr;
-  std::vector<int> best_corr_quad;
-  QuadStats best_stats;
-  // Attempt 0: constant-velocity prediction (narrow windows). Attempt 1: the global image
-  // shift (median flow of a wide search on a subset, which captures fast turns), then narrow
-  // windows around the shifted positions; without enough wide matches, wide windows.
-  for (int attempt = can_predict ? 0 : 1; attempt < 2; ++attempt) {
-    const bool predict = attempt == 0;
-    std::vector<cv::Point2f> pred_l(static_cast<size_t>(prev.fl.size()), cv::Point2f(-1, -1));
-    std::vector<cv::Point2f> pred_r(static_cast<size_t>(prev.fr.size()), cv::Point2f(-1, -1));
-    double radius = options_.matching.window_px;
-    cv::Point2f shift(0, 0);
-    if (!predict) {
-      std::vector<cv::Point2f> probe(static_cast<size_t>(prev.fl.size()), cv::Point2f(-1, -1));
-      const int step = std::max(1, prev.stereo_matches / 200);
-      int n = 0;
-      for (int i = 0; i < prev.fl.size(); ++i) {
-        if (prev.stereo[static_cast<size_t>(i)] >= 0 && n++ % step == 0) {
-          probe[static_cast<size_t>(i)] = prev.fl.keypoints[static_cast<size_t>(i)].pt;
-        }
-      }
-      const std::vector<int> wide = MatchTemporal(
-          prev.fl, cur->fl, probe, options_.matching.window_unpredicted_px, options_.matching);
-      std::vector<float> dx, dy;
-      for (size_t i = 0; i < wide.size(); ++i) {
-        if (wide[i] < 0) continue;
-        dx.push_back(cur->fl.keypoints[static_cast<size_t>(wide[i])].pt.x - probe[i].x);
-        dy.push_back(cur->fl.keypoints[static_cast<size_t>(wide[i])].pt.y - probe[i].y);
-      }
-      if (dx.size() >= 8) {
-        std::nth_element(dx.begin(), dx.begin() + static_cast<long>(dx.size() / 2), dx.end());
-        std::nth_element(dy.begin(), dy.begin() + static_cast<long>(dy.size() / 2), dy.end());
-        shift = cv::Point2f(dx[dx.size() / 2], dy[dy.size() / 2]);
-        // Translation makes the flow non-uniform: allow for it around the global shift.
-        radius =
-            std::min(options_.matching.window_unpredicted_px, 3.0 * options_.matching.window_px);
-      } else {
-        radius = options_.matching.window_unpredicted_px;
-      }
-    }
-    const Eigen::Isometry3d T_b_a = T_prev_velocity_.inverse();
-    for (int i = 0; i < prev.fl.size(); ++i) {
-      const int j = prev.stereo[static_cast<size_t>(i)];
-      if (j < 0) continue;
-      const cv::Point2f pl = prev.fl.keypoints[static_cast<size_t>(i)].pt;
-      const cv::Point2f pr = prev.fr.keypoints[static_cast<size_t>(j)].pt;
-      if (!predict) {
-        pred_l[static_cast<size_t>(i)] = pl + shift;
-        pred_r[static_cast<size_t>(j)] = pr + shift;
-        continue;
-      }
-      Eigen::Vector3d uvu;
-      if (!camera_.Project(T_b_a * camera_.Triangulate(pl.x, pl.y, pl.x - pr.x), &uvu)) continue;
-      pred_l[static_cast<size_t>(i)] =
-          cv::Point2f(static_cast<float>(uvu(0)), static_cast<float>(uvu(1)));
-      pred_r[static_cast<size_t>(j)] =
-          cv::Point2f(static_cast<float>(uvu(2)), static_cast<float>(uvu(1)));
-    }
-    const std::vector<int> tl = MatchTemporal(prev.fl, cur->fl, pred_l, radius, options_.matching);
-    const std::vector<int> tr = MatchTemporal(prev.fr, cur->fr, pred_r, radius, options_.matching);
-    quads = CloseQuadrilaterals(prev.fl, prev.fr, cur->fl, cur->fr, prev.stereo, cur->stereo, tl,
-                                tr, options_.matching, &qstats);
-    // Correspondences (left corners as detected, right x sub-pixel, see RefineStereo) and the
-    // RANSAC motion; a failed attempt (e.g. consistent but wrong matches on repetitive
-    // texture under a bad prediction) falls through to the global-shift search.
-    corr.clear();
-    corr_quad.clear();
-    for (size_t k = 0; k < quads.size(); ++k) {
-      const cv::Point2f la = prev.fl.keypoints[static_cast<size_t>(quads[k].left_a)].pt;
-      const cv::Point2f lb = cur->fl.keypoints[static_cast<size_t>(quads[k].left_b)].pt;
-      // Right x corrected by the disparity offset estimate (yaw of the right camera).
-      const double ra_x =
-          CorrectRightX(camera_, prev.right_x[static_cast<size_t>(quads[k].left_a)], offset_px_);
-      const double rb_x =
-          CorrectRightX(camera_, cur->right_x[static_cast<size_t>(quads[k].left_b)], offset_px_);
-      const double da = la.x - ra_x, db = lb.x - rb_x;
-      if (!(da > 0 && db > 0)) continue;
-      StereoCorrespondence c;
-      // Rectified pair: the left row is the point's row (the right one was aligned to it).
-      c.obs_a = Eigen::Vector3d(la.x, la.y, ra_x);
-      c.obs_b = Eigen::Vector3d(lb.x, lb.y, rb_x);
-      c.p_a = camera_.Triangulate(la.x, la.y, da);
-      c.p_b = camera_.Triangulate(lb.x, lb.y, db);
-      corr.push_back(c);
-      corr_quad.push_back(static_cast<int>(k));
-    }
-    if (static_cast<int>(corr.size()) < options_.min_quads) continue;
-    RansacResult r = RansacMotion(camera_, corr, options_.ransac);
-    // Keep the attempt with the most inliers; stop early when this one is clearly good.
-    if (r.ok && (!ransac.ok || r.inliers.size() > ransac.inliers.size())) {
-      ransac = std::move(r);
-      best_quads = quads;
-      best_corr = corr;
-      best_corr_quad = corr_quad;
-      best_stats = qstats;
-    }
-    if (ransac.ok && static_cast<int>(ransac.inliers.size()) >= 2 * options_.min_quads) break;
-  }
-  if (ransac.ok) {
-    quads.swap(best_quads);
-    corr.swap(best_corr);
-    corr_quad.swap(best_corr_quad);
-    qstats = best_stats;
-  }
-  result.stats.quads = qstats;
+  double t0 = NowMs();
+  const stages::FrameMatch match =
+      stages::SearchMotion(camera_, prev, *cur, stages::VelocityPredicts(dt_s, velocity_dt_s_),
+                           T_prev_velocity_, offset_px_, options_);
+  const std::vector<StereoCorrespondence>& corr = match.corr.corr;
+  result.stats.quads = match.quads.stats;
   result.stats.ms_matching += NowMs() - t0;
   if (static_cast<int>(corr.size()) < options_.min_quads) {
-    return reject(TrackingState::kNotTracked,
+    return Reject(std::move(result), TrackingState::kNotTracked,
                   "only " + std::to_string(corr.size()) + " closed quadrilaterals (need " +
                       std::to_string(options_.min_quads) + ") against the frame " +
-                      std::to_string(dt_s) + " s earlier");
+                      std::to_string(dt_s) + " s earlier",
+                  t_start);
+  }
+  t0 = NowMs();
+  result.stats.ransac_iterations = match.ransac.iterations;
+  result.stats.ransac_inliers = static_cast<int>(match.ransac.inliers.size());
+  if (!match.ransac.ok) {
+    result.stats.ms_motion = NowMs() - t0;
+    return Reject(std::move(result), TrackingState::kNotTracked,
+                  "RANSAC found no consistent motion (" +
+                      std::to_string(match.ransac.inliers.size()) + " inliers of " +
+                      std::to_string(corr.size()) + ")",
+                  t_start);
   }
 
-  // ---- motion: RANSAC + SVD (above), then refinement ----
-  t0 = NowMs();
-  result.stats.ransac_iterations = ransac.iterations;
-  result.stats.ransac_inliers = static_cast<int>(ransac.inliers.size());
-  if (!ransac.ok) {
-    result.stats.ms_motion = NowMs() - t0;
-    return reject(TrackingState::kNotTracked,
-                  "RANSAC found no consistent motion (" + std::to_string(ransac.inliers.size()) +
-                      " inliers of " + std::to_string(corr.size()) + ")");
-  }
-  Eigen::Isometry3d T_a_b = ransac.T_a_b;
-  std::vector<int> inliers = ransac.inliers;
-  Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Identity() * 1e-2;
-  // Disparity offset prior: the filter's prediction (random walk since its last update). The
-  // prior's variance is halved because every frame's observations enter two frame pairs.
-  constexpr double kReuse = 0.5;
-  double offset_pred_var = offset_var_px2_;
-  if (offset_utime_ >= 0) {
-    offset_pred_var += options_.disparity_offset_drift_px * options_.disparity_offset_drift_px *
-                       static_cast<double>(utime - offset_utime_) * 1e-6;
-  }
+  // ---- refinement ----
+  const double offset_pred_var = PredictedOffsetVariance(utime);
   OffsetPrior offset_prior;
   offset_prior.variance_px2 = kReuse * offset_pred_var;
   offset_prior.sigma_px = pixel_sigma_px_;
-  RefineResult offset_result;
-  if (options_.use_refinement) {
-    for (int round = 0; round < options_.refine_rounds; ++round) {
-      const RefineResult refined =
-          RefineMotion(camera_, corr, inliers, T_a_b, options_.refine, nullptr,
-                       options_.estimate_disparity_offset ? &offset_prior : nullptr);
-      offset_result = refined;
-      if (!refined.ok) {
-        result.stats.ms_motion = NowMs() - t0;
-        return reject(TrackingState::kNotTracked, "motion refinement failed (degenerate geometry)");
-      }
-      T_a_b = refined.T_a_b;
-      cov = refined.covariance;
-      result.stats.reprojection_rms_px = refined.rms_px;
-      if (round + 1 == options_.refine_rounds) break;
-      // Re-select inliers with the refined motion, both directions.
-      std::vector<int> next;
-      const Eigen::Isometry3d T_b_a = T_a_b.inverse();
-      Eigen::Vector3d fwd, bwd;
-      for (int i = 0; i < static_cast<int>(corr.size()); ++i) {
-        const StereoCorrespondence& c = corr[static_cast<size_t>(i)];
-        if (!camera_.Project(T_b_a * c.p_a, &fwd) || !camera_.Project(T_a_b * c.p_b, &bwd)) {
-          continue;
-        }
-        const double e =
-            std::max((fwd - c.obs_b).cwiseAbs().maxCoeff(), (bwd - c.obs_a).cwiseAbs().maxCoeff());
-        if (e <= options_.ransac.inlier_threshold_px) next.push_back(i);
-      }
-      if (static_cast<int>(next.size()) < options_.ransac.min_inliers) break;
-      inliers.swap(next);
-    }
+  const stages::Refinement refined =
+      stages::RefineStage(camera_, corr, match.ransac,
+                          options_.estimate_disparity_offset ? &offset_prior : nullptr, options_);
+  result.stats.reprojection_rms_px = refined.rms_px;
+  if (!refined.ok) {
+    result.stats.ms_motion = NowMs() - t0;
+    return Reject(std::move(result), TrackingState::kNotTracked,
+                  "motion refinement failed (degenerate geometry)", t_start);
   }
-  result.stats.inliers = static_cast<int>(inliers.size());
+  const Eigen::Isometry3d& T_a_b = refined.T_a_b;
+  result.stats.inliers = static_cast<int>(refined.inliers.size());
   result.stats.ms_motion = NowMs() - t0;
   const double speed = T_a_b.translation().norm() / std::max(dt_s, 1e-6);
   if (speed > options_.max_speed_mps) {
-    return reject(TrackingState::kNotTracked, "implausible motion " + std::to_string(speed) +
-                                                  " m/s (max_speed_mps " +
-                                                  std::to_string(options_.max_speed_mps) + ")");
+    return Reject(std::move(result), TrackingState::kNotTracked,
+                  "implausible motion " + std::to_string(speed) + " m/s (max_speed_mps " +
+                      std::to_string(options_.max_speed_mps) + ")",
+                  t_start);
   }
 
-  // ---- accept: disparity offset filter, pose chain, tracks, keyframes ----
-  if (offset_result.ok) {
-    pixel_sigma_px_ = std::clamp(offset_result.sigma_px, 0.1, 2.0);
-  }
-  if (offset_result.ok && offset_result.offset_estimated) {
-    // Kalman update with the data's information counted kReuse times (see above).
-    offset_px_ += offset_result.offset_px;
-    offset_var_px2_ =
-        1.0 / (1.0 / offset_pred_var + kReuse * offset_result.offset_data_information);
-    offset_utime_ = utime;
-    if (std::abs(offset_px_) > options_.disparity_offset_max_px) {
-      result.message = "disparity offset estimate " + std::to_string(offset_px_) +
-                       " px exceeds disparity_offset_max_px " +
-                       std::to_string(options_.disparity_offset_max_px) +
-                       ": reset to the initial value; check the stereo calibration";
-      offset_px_ = options_.disparity_offset_initial_px;
-      offset_var_px2_ =
-          options_.disparity_offset_initial_sd_px * options_.disparity_offset_initial_sd_px;
-    }
-  }
-  T_world_camera_ = T_world_camera_ * T_a_b;
-  T_prev_velocity_ = T_a_b;
-  velocity_dt_s_ = dt_s;
-  result.T_prev_camera = T_a_b;
-  int tracked_from_keyframe = 0;
-  for (int k : inliers) {
-    const Quad& q = quads[static_cast<size_t>(corr_quad[static_cast<size_t>(k)])];
-    const int64_t id = prev.track_id[static_cast<size_t>(q.left_a)];
-    cur->track_id[static_cast<size_t>(q.left_b)] = id;
-    if (id >= 0 && id <= keyframe_max_track_id_) ++tracked_from_keyframe;
-  }
-  assign_new_tracks(cur.get());
-  cov_kf_camera_ = ComposeCovariance(cov_kf_camera_, T_a_b, cov);
-  T_kf_camera_ = T_kf_camera_ * T_a_b;
-  const double overlap =
-      keyframe_tracks_ > 0 ? static_cast<double>(tracked_from_keyframe) / keyframe_tracks_ : 0.0;
-  const double kf_rot_deg = fl::RotationAngle(T_kf_camera_.linear()) * 180.0 / M_PI;
-  const bool new_keyframe =
-      T_kf_camera_.translation().norm() >= options_.keyframe_translation_m ||
-      kf_rot_deg >= options_.keyframe_rotation_deg || overlap < options_.keyframe_min_overlap ||
-      static_cast<double>(utime - keyframe_utime_) * 1e-6 >= options_.keyframe_max_interval_s;
-  if (new_keyframe) {
-    KeyframeFactor f;
-    f.utime_i = keyframe_utime_;
-    f.utime_j = utime;
-    f.keyframe_id_i = keyframe_id_;
-    const Eigen::Isometry3d& T_bc = calibration_.T_base_camera;
-    f.T_i_j = T_bc * T_kf_camera_ * T_bc.inverse();
-    f.covariance = ChangeFrameCovariance(cov_kf_camera_, T_bc);
-    f.covariance = 0.5 * (f.covariance + f.covariance.transpose());
-    Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(f.covariance);
-    f.information = ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
-    f.information = 0.5 * (f.information + f.information.transpose());
-    make_keyframe(cur.get());
-    f.keyframe_id_j = keyframe_id_;
-    if (f.information.allFinite()) result.factor = f;
-  }
+  // ---- accept: disparity offset filter, pose chain, tracks, keyframe decision ----
+  UpdateOffset(refined.last, offset_pred_var, utime, &result);
+  AdvancePose(refined, dt_s, &result);
+  const int tracked_from_keyframe =
+      stages::PropagateTracks(prev, match, refined.inliers, keyframe_max_track_id_, cur.get());
+  stages::AssignNewTracks(cur.get(), &next_track_id_);
+  AddKeyframeFactorIfDue(*cur, tracked_from_keyframe, &result);
   result.state = TrackingState::kTracked;
   std::ostringstream msg;
   msg << "tracked: " << result.stats.inliers << "/" << corr.size() << " inliers, rms "
@@ -588,8 +260,115 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
   if (!result.message.empty()) msg << "; " << result.message;
   result.message = msg.str();
   last_good_ = std::move(cur);
-  fill_pose();
+  return Finish(std::move(result), t_start);
+}
+
+StereoVoResult StereoVo::Reject(StereoVoResult result, TrackingState state, const std::string& why,
+                                double t_start) const {
+  result.state = state;
+  result.message = (state == TrackingState::kRejected ? "rejected: " : "not tracked: ") + why;
+  return Finish(std::move(result), t_start);
+}
+
+StereoVoResult StereoVo::Finish(StereoVoResult result, double t_start) const {
+  result.pose_valid = initialized_;
+  result.T_world_camera = T_world_camera_;
+  result.T_world_base = T_world_camera_ * calibration_.T_base_camera.inverse();
+  result.stats.disparity_offset_px = offset_px_;
+  result.stats.disparity_offset_sd_px = std::sqrt(offset_var_px2_);
+  result.stats.ms_total = NowMs() - t_start;
   return result;
+}
+
+// The first frame, or the first of a new segment after a gap (then last_good_ is set).
+StereoVoResult StereoVo::Initialize(std::unique_ptr<stages::StereoFrame> frame,
+                                    StereoVoResult result, double t_start) {
+  if (last_good_) {
+    ++segment_;
+    result.new_segment = true;
+    result.segment = segment_;
+    result.message =
+        "initialized a new segment: " + std::to_string((frame->utime - last_good_->utime) * 1e-6) +
+        " s since the last tracked frame (max_gap_s " + std::to_string(options_.max_gap_s) +
+        "); the motion across the gap is unknown and no factor links it";
+  } else {
+    result.message = "initialized";
+  }
+  initialized_ = true;
+  velocity_dt_s_ = 0;
+  stages::AssignNewTracks(frame.get(), &next_track_id_);
+  StartKeyframe(*frame, &result);
+  result.state = TrackingState::kInitialized;
+  last_good_ = std::move(frame);
+  return Finish(std::move(result), t_start);
+}
+
+void StereoVo::StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* result) {
+  result->is_keyframe = true;
+  result->keyframe_id = next_keyframe_id_;
+  keyframe_id_ = next_keyframe_id_++;
+  keyframe_utime_ = frame.utime;
+  T_kf_camera_.setIdentity();
+  cov_kf_camera_.setZero();
+  keyframe_max_track_id_ = next_track_id_ - 1;
+  keyframe_tracks_ = frame.stereo_matches;
+  stages::KeyframePoints(camera_, frame, offset_px_, &result->keyframe_points,
+                         &result->keyframe_intensities);
+}
+
+double StereoVo::PredictedOffsetVariance(Utime utime) const {
+  double var = offset_var_px2_;
+  if (offset_utime_ >= 0) {
+    var += options_.disparity_offset_drift_px * options_.disparity_offset_drift_px *
+           static_cast<double>(utime - offset_utime_) * 1e-6;
+  }
+  return var;
+}
+
+void StereoVo::UpdateOffset(const RefineResult& refined, double predicted_variance, Utime utime,
+                            StereoVoResult* result) {
+  if (refined.ok) pixel_sigma_px_ = std::clamp(refined.sigma_px, 0.1, 2.0);
+  if (!refined.ok || !refined.offset_estimated) return;
+  // Kalman update with the data's information counted kReuse times (see kReuse).
+  offset_px_ += refined.offset_px;
+  offset_var_px2_ = 1.0 / (1.0 / predicted_variance + kReuse * refined.offset_data_information);
+  offset_utime_ = utime;
+  if (std::abs(offset_px_) > options_.disparity_offset_max_px) {
+    result->message = "disparity offset estimate " + std::to_string(offset_px_) +
+                      " px exceeds disparity_offset_max_px " +
+                      std::to_string(options_.disparity_offset_max_px) +
+                      ": reset to the initial value; check the stereo calibration";
+    offset_px_ = options_.disparity_offset_initial_px;
+    offset_var_px2_ =
+        options_.disparity_offset_initial_sd_px * options_.disparity_offset_initial_sd_px;
+  }
+}
+
+// The frame-to-frame motion onto the world pose, the velocity and the keyframe chain.
+void StereoVo::AdvancePose(const stages::Refinement& refined, double dt_s, StereoVoResult* result) {
+  const Eigen::Isometry3d& T_a_b = refined.T_a_b;
+  T_world_camera_ = T_world_camera_ * T_a_b;
+  T_prev_velocity_ = T_a_b;
+  velocity_dt_s_ = dt_s;
+  result->T_prev_camera = T_a_b;
+  cov_kf_camera_ = ComposeCovariance(cov_kf_camera_, T_a_b, refined.covariance);
+  T_kf_camera_ = T_kf_camera_ * T_a_b;
+}
+
+void StereoVo::AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int tracked_from_keyframe,
+                                      StereoVoResult* result) {
+  if (!stages::NeedsKeyframe(T_kf_camera_, tracked_from_keyframe, keyframe_tracks_,
+                             frame.utime - keyframe_utime_, options_)) {
+    return;
+  }
+  KeyframeFactor f =
+      stages::MakeKeyframeFactor(calibration_.T_base_camera, T_kf_camera_, cov_kf_camera_);
+  f.utime_i = keyframe_utime_;
+  f.utime_j = frame.utime;
+  f.keyframe_id_i = keyframe_id_;
+  StartKeyframe(frame, result);
+  f.keyframe_id_j = keyframe_id_;
+  if (f.information.allFinite()) result->factor = f;
 }
 
 }  // namespace fl::vo

@@ -25,6 +25,10 @@
 #include "fusionloc/stereo_vo/motion.hpp"
 
 namespace fl::vo {
+namespace stages {
+struct StereoFrame;  // stereo_vo_stages.hpp
+struct Refinement;
+}  // namespace stages
 
 // Calibration of a rectified stereo rig (the library's own plain struct).
 struct StereoCalibration {
@@ -176,14 +180,27 @@ class StereoVo {
   const StereoVoOptions& options() const { return options_; }
 
  private:
-  struct Frame;
-  int RefineStereo(Frame* f) const;
+  // Steps of AddStereoFrame besides the stages of stereo_vo_stages.hpp.
+  StereoVoResult Reject(StereoVoResult result, TrackingState state, const std::string& why,
+                        double t_start) const;
+  StereoVoResult Finish(StereoVoResult result, double t_start) const;
+  StereoVoResult Initialize(std::unique_ptr<stages::StereoFrame> frame, StereoVoResult result,
+                            double t_start);
+  StereoVoResult Track(std::unique_ptr<stages::StereoFrame> cur, StereoVoResult result,
+                       double t_start);
+  void StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* result);
+  void AdvancePose(const stages::Refinement& refined, double dt_s, StereoVoResult* result);
+  double PredictedOffsetVariance(Utime utime) const;
+  void UpdateOffset(const RefineResult& refined, double predicted_variance, Utime utime,
+                    StereoVoResult* result);
+  void AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int tracked_from_keyframe,
+                              StereoVoResult* result);
   StereoVoOptions options_;
   StereoCalibration calibration_;
   StereoCamera camera_;
   FeatureExtractor extractor_;
-  std::unique_ptr<Frame> last_good_;  // previous successfully processed frame
-  Utime last_utime_ = -1;             // last accepted input time
+  std::unique_ptr<stages::StereoFrame> last_good_;  // previous successfully processed frame
+  Utime last_utime_ = -1;                           // last accepted input time
   bool initialized_ = false;
   int segment_ = 0;
   // Pose chain.
