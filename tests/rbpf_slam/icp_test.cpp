@@ -119,16 +119,27 @@ TEST(IcpCovariance, ModelIsCalibratedInARoom) {
   IcpOptions o;
   o.floor_sigma_xy = 1e-6;
   o.floor_sigma_theta = 1e-7;
-  const Chi2Trials t = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 150, 3, o);
-  ASSERT_GE(t.chi2.size(), 140u) << t.failures << " failures";
+  // 400 pairs: the mean of χ²₃ has a standard error of 0.12 (this one's tail is heavier: 0.17).
+  const Chi2Trials t = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 400, 3, o);
+  ASSERT_GE(t.chi2.size(), 390u) << t.failures << " failures";
   std::vector<double> sorted = t.chi2;
   std::sort(sorted.begin(), sorted.end());
-  std::cout << "room (no floor): mean chi2 " << t.mean << ", median " << sorted[sorted.size() / 2]
-            << " (calibrated: 3, 2.37)\n";
-  EXPECT_GT(t.mean, 1.5);
-  EXPECT_LT(t.mean, 6.0);
+  const double median = sorted[sorted.size() / 2];
+  const double above_p95 =  // fraction above the 95% quantile of χ²₃
+      static_cast<double>(sorted.end() - std::upper_bound(sorted.begin(), sorted.end(), 7.815)) /
+      static_cast<double>(sorted.size());
+  std::cout << "room (no floor): mean chi2 " << t.mean << ", median " << median << ", " << above_p95
+            << " above 7.815 (calibrated: 3, 2.37, 0.05)\n";
+  // The fit is a little over-confident here (mean 3.7, median 2.7, 10% above). The bounds fail
+  // a covariance 1.5 times too large (mean 2.4) or too small (5.5), or without the correlation
+  // inflation κ (mean 4.2, median 3.1, 14% above).
+  EXPECT_GT(t.mean, 3.0);
+  EXPECT_LT(t.mean, 4.0);
+  EXPECT_GT(median, 2.0);
+  EXPECT_LT(median, 3.0);
+  EXPECT_LT(above_p95, 0.12);
   // With the default floor the covariance may only get more conservative.
-  const Chi2Trials d = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 150, 3, IcpOptions());
+  const Chi2Trials d = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 400, 3, IcpOptions());
   EXPECT_LT(d.mean, t.mean);
 }
 
@@ -154,15 +165,18 @@ TEST(IcpCovariance, IsLargeAlongACorridorAxis) {
   EXPECT_GT(t.mean_sigma_x, 1.0);                 // "unknown", not centimetres
   EXPECT_LT(t.rms_err_x, 0.25 * t.mean_sigma_x);  // the error is well inside what is reported
   EXPECT_LT(t.mean, 6.0);                         // not over-confident (with the default floor)
-  // Without the floor (the fitted part alone) y / heading are somewhat over-confident on this
-  // perfectly straight synthetic corridor; bound how much.
+  // Without the floor (the fitted part alone) y / heading are over-confident on this perfectly
+  // straight synthetic corridor: mean 11.2 (median 6.5) where a calibrated covariance would give
+  // about 2 (the axis adds almost nothing). Bound how much, tightly enough to fail a fitted
+  // covariance 1.5 times smaller (mean 16.7) or larger (7.4); lower the bounds if the fitted
+  // part gets more honest here.
   IcpOptions o;
   o.floor_sigma_xy = 1e-6;
   o.floor_sigma_theta = 1e-7;
   const Chi2Trials m = RunChi2Trials(world, far, 682, 240.0 * M_PI / 180.0, 10.0, 0.03, 90, 5, o);
   std::cout << "corridor (no floor): mean chi2 " << m.mean << "\n";
-  EXPECT_GT(m.mean, 1.5);
-  EXPECT_LT(m.mean, 15.0);
+  EXPECT_GT(m.mean, 8.0);
+  EXPECT_LT(m.mean, 13.0);
   EXPECT_GT(m.mean_sigma_x, 1.0);
 }
 
