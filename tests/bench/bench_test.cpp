@@ -2,8 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "test_paths.hpp"
 
@@ -57,7 +60,38 @@ TEST(Bench, RecordReplacesOnlyItsOwnSection) {
   EXPECT_NE(text.find("| intel | 0.25 | 910 |"), std::string::npos) << text;
 }
 
-TEST(Bench, PeakRssIsPositive) { EXPECT_GT(PeakRssMb(), 0.0); }
+// [MB] the resident memory of this process now (VmRSS), read independently of PeakRssMb.
+double CurrentRssMb() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  }
+  return -1.0;
+}
+
+// Touching 50 MB raises the peak to about the resident size plus 50 MB (in MB, not kB or
+// pages), and freeing them leaves the peak where it was (the high-water mark, not the current
+// size).
+TEST(Bench, PeakRssRisesByTheMemoryTouchedAndStays) {
+  constexpr size_t kBytes = size_t{50} << 20;
+  const double rss_before = CurrentRssMb(), peak_before = PeakRssMb();
+  ASSERT_GT(rss_before, 0.0);
+  EXPECT_GE(peak_before, rss_before - 0.1);
+  double peak_with = 0.0;
+  {
+    std::vector<char> block(kBytes);  // zero-filled: every page written
+    for (size_t i = 0; i < kBytes; i += 4096) block[i] = static_cast<char>(i >> 12);
+    peak_with = PeakRssMb();
+    EXPECT_EQ(block[kBytes / 2], static_cast<char>((kBytes / 2) >> 12));  // the block is used
+  }
+  const double expected = std::max(peak_before, rss_before + 50.0);
+  EXPECT_NEAR(peak_with, expected, 3.0) << "before: rss " << rss_before << ", peak " << peak_before;
+  EXPECT_GT(peak_with, peak_before + 40.0);
+  // (The kernel syncs its per-thread RSS counters in batches of up to 64 pages.)
+  EXPECT_GT(PeakRssMb(), peak_with - 0.5) << "after freeing the 50 MB";
+  EXPECT_LT(CurrentRssMb(), peak_with - 40.0) << "the 50 MB are given back";
+}
 
 }  // namespace
 }  // namespace fl::bench

@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <string>
 
+#include "fusionloc/rbpf_slam/scan_matcher.hpp"
 #include "laser_fixtures.hpp"
 
 namespace fl::rbpf {
@@ -117,16 +119,27 @@ TEST(IcpCovariance, ModelIsCalibratedInARoom) {
   IcpOptions o;
   o.floor_sigma_xy = 1e-6;
   o.floor_sigma_theta = 1e-7;
-  const Chi2Trials t = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 150, 3, o);
-  ASSERT_GE(t.chi2.size(), 140u) << t.failures << " failures";
+  // 400 pairs: the mean of χ²₃ has a standard error of 0.12 (this one's tail is heavier: 0.17).
+  const Chi2Trials t = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 400, 3, o);
+  ASSERT_GE(t.chi2.size(), 390u) << t.failures << " failures";
   std::vector<double> sorted = t.chi2;
   std::sort(sorted.begin(), sorted.end());
-  std::cout << "room (no floor): mean chi2 " << t.mean << ", median " << sorted[sorted.size() / 2]
-            << " (calibrated: 3, 2.37)\n";
-  EXPECT_GT(t.mean, 1.5);
-  EXPECT_LT(t.mean, 6.0);
+  const double median = sorted[sorted.size() / 2];
+  const double above_p95 =  // fraction above the 95% quantile of χ²₃
+      static_cast<double>(sorted.end() - std::upper_bound(sorted.begin(), sorted.end(), 7.815)) /
+      static_cast<double>(sorted.size());
+  std::cout << "room (no floor): mean chi2 " << t.mean << ", median " << median << ", " << above_p95
+            << " above 7.815 (calibrated: 3, 2.37, 0.05)\n";
+  // The fit is a little over-confident here (mean 3.7, median 2.7, 10% above). The bounds fail
+  // a covariance 1.5 times too large (mean 2.4) or too small (5.5), or without the correlation
+  // inflation κ (mean 4.2, median 3.1, 14% above).
+  EXPECT_GT(t.mean, 3.0);
+  EXPECT_LT(t.mean, 4.0);
+  EXPECT_GT(median, 2.0);
+  EXPECT_LT(median, 3.0);
+  EXPECT_LT(above_p95, 0.12);
   // With the default floor the covariance may only get more conservative.
-  const Chi2Trials d = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 150, 3, IcpOptions());
+  const Chi2Trials d = RunChi2Trials(world, starts, 361, M_PI, 25.0, 0.01, 400, 3, IcpOptions());
   EXPECT_LT(d.mean, t.mean);
 }
 
@@ -152,16 +165,72 @@ TEST(IcpCovariance, IsLargeAlongACorridorAxis) {
   EXPECT_GT(t.mean_sigma_x, 1.0);                 // "unknown", not centimetres
   EXPECT_LT(t.rms_err_x, 0.25 * t.mean_sigma_x);  // the error is well inside what is reported
   EXPECT_LT(t.mean, 6.0);                         // not over-confident (with the default floor)
-  // Without the floor (the fitted part alone) y / heading are somewhat over-confident on this
-  // perfectly straight synthetic corridor; bound how much.
+  // Without the floor (the fitted part alone) y / heading are over-confident on this perfectly
+  // straight synthetic corridor: mean 11.2 (median 6.5) where a calibrated covariance would give
+  // about 2 (the axis adds almost nothing). Bound how much, tightly enough to fail a fitted
+  // covariance 1.5 times smaller (mean 16.7) or larger (7.4); lower the bounds if the fitted
+  // part gets more honest here.
   IcpOptions o;
   o.floor_sigma_xy = 1e-6;
   o.floor_sigma_theta = 1e-7;
   const Chi2Trials m = RunChi2Trials(world, far, 682, 240.0 * M_PI / 180.0, 10.0, 0.03, 90, 5, o);
   std::cout << "corridor (no floor): mean chi2 " << m.mean << "\n";
-  EXPECT_GT(m.mean, 1.5);
-  EXPECT_LT(m.mean, 15.0);
+  EXPECT_GT(m.mean, 8.0);
+  EXPECT_LT(m.mean, 13.0);
   EXPECT_GT(m.mean_sigma_x, 1.0);
+}
+
+// The Jacobian of one pair (PoseJacobian of the normal, used by the steps and the covariance)
+// against central differences of e = nᵀ (R(θ) q + t − r) (icp.hpp), at headings all around the
+// circle.
+TEST(Icp, PointToLineJacobianMatchesNumericDifferentiation) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double h = 1e-6;
+  for (int t = 0; t < 200; ++t) {
+    const fl::Pose2 T(5 * u(rng), 5 * u(rng), M_PI * u(rng));
+    const Eigen::Vector2d q(10 * u(rng), 10 * u(rng)), r(10 * u(rng), 10 * u(rng));
+    const double a = M_PI * u(rng);
+    const Eigen::Vector2d n(std::cos(a), std::sin(a));
+    auto e = [&](const fl::Pose2& P) { return n.dot(P * q - r); };
+    const Eigen::Vector3d J = PoseJacobian(n, q, std::cos(T.theta), std::sin(T.theta));
+    const Eigen::Vector3d numeric(
+        (e(fl::Pose2(T.x + h, T.y, T.theta)) - e(fl::Pose2(T.x - h, T.y, T.theta))) / (2 * h),
+        (e(fl::Pose2(T.x, T.y + h, T.theta)) - e(fl::Pose2(T.x, T.y - h, T.theta))) / (2 * h),
+        (e(fl::Pose2(T.x, T.y, T.theta + h)) - e(fl::Pose2(T.x, T.y, T.theta - h))) / (2 * h));
+    EXPECT_LT((J - numeric).norm(), 1e-6 * (1 + q.norm()))
+        << "J " << J.transpose() << ", numeric " << numeric.transpose();
+  }
+}
+
+// Noisy scans (3 cm range noise) of a turn of ±0.6 rad at headings around the circle, ICP
+// started 0.15 rad and 14 cm from the truth: Gauss-Newton with the right Jacobian converges
+// (step below 1e-5) in 10-16 iterations (9 at the earliest: the pairing distance reaches its
+// final value at iteration 9), within 1.7 cm and 3.3 mrad of the truth. With one sign wrong it
+// stops elsewhere (decimetres off) or creeps on and runs out of iterations.
+TEST(Icp, RecoversNoisyScansFromALargeRotation) {
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  int iterations = 0;
+  unsigned seed = 60;
+  for (const fl::Pose2& pose_i : {fl::Pose2(-6.0, -4.5, 0.1), fl::Pose2(5.0, -4.6, 2.0),
+                                  fl::Pose2(7.8, -1.0, -1.6), fl::Pose2(0.0, 4.5, M_PI)}) {
+    for (const double turn : {0.6, -0.6}) {
+      const fl::Pose2 T_i_j(0.3, 0.05, turn);
+      const auto ref = ComputeNormals(ScanPoints(world, pose_i, 0.03, seed++));
+      const auto query = ScanPoints(world, pose_i * T_i_j, 0.03, seed++);
+      const fl::Pose2 init = T_i_j * fl::Pose2(0.1, -0.1, turn > 0 ? -0.15 : 0.15);
+      const IcpResult r = AlignPointToLine(ref, query, init, IcpOptions());
+      const fl::Pose2 e = T_i_j.between(r.T_ref_query);
+      const std::string where =
+          "turn " + std::to_string(turn) + " at heading " + std::to_string(pose_i.theta);
+      EXPECT_TRUE(r.ok) << where << ": " << r.failure;
+      EXPECT_TRUE(r.converged) << where << ": " << r.iterations << " iterations";
+      EXPECT_LT(std::hypot(e.x, e.y), 0.025) << where;
+      EXPECT_LT(std::abs(e.theta), 0.005) << where;
+      iterations += r.iterations;
+    }
+  }
+  EXPECT_LE(iterations, 8 * 14) << "8 alignments";
 }
 
 TEST(Icp, FailsClearlyWithTooFewPoints) {

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <string>
 
 #include "stereo_fixtures.hpp"
 
@@ -180,6 +181,135 @@ TEST(StereoVoMatching, QuadrilateralCheckRejectsInconsistentMatches) {
                               temporal_right, opts, &stats);
   EXPECT_EQ(quads.size(), 1u);
   EXPECT_EQ(quads[0].left_a, 1);
+}
+
+// The paper's rules (MSIF §2) as this project's defaults, written out here so that a changed
+// default fails the tests below as much as a changed rule in matching.cpp does.
+constexpr double kSlopeK = 0.35;            // eq. 9: tan of the angle between the flows
+constexpr double kEpipolarPx = 3.0;         // |v_left - v_right|
+constexpr double kMaxDisparityPx = 160.0;   // d_max
+constexpr double kMaxDisparityRatio = 1.6;  // d_t+1 / d_t within [1/r, r]
+// Each rule is probed this much inside and outside its bound.
+constexpr double kInside = 0.99, kOutside = 1.01;
+
+// What CloseQuadrilaterals (default options) makes of one quadrilateral: "kept", "slope",
+// "parallax" or "not closed".
+std::string CloseOne(cv::Point2f la, cv::Point2f ra, cv::Point2f lb, cv::Point2f rb) {
+  const Features fla = MakeFeatures({la}, {1}), fra = MakeFeatures({ra}, {1}),
+                 flb = MakeFeatures({lb}, {1}), frb = MakeFeatures({rb}, {1});
+  QuadStats s;
+  const std::vector<int> one = {0};
+  CloseQuadrilaterals(fla, fra, flb, frb, one, one, one, one, MatchOptions(), &s);
+  if (s.kept == 1) return "kept";
+  if (s.slope_rejected == 1) return "slope";
+  if (s.parallax_rejected == 1) return "parallax";
+  return "not closed";
+}
+
+// The tan of the angle between the lines of two flows as matching.hpp defines it:
+// |k_l - k_r| / |1 + k_l k_r| with the slopes k = dy / dx.
+double SlopeTan(cv::Point2f fl, cv::Point2f fr) {
+  const double kl = static_cast<double>(fl.y) / fl.x, kr = static_cast<double>(fr.y) / fr.x;
+  return std::abs(kl - kr) / std::abs(1 + kl * kr);
+}
+
+// Both flows point the same way with the same vertical part (the epipolar check passes) and
+// their lines meet at an angle whose tan is just below or just above K, the right flow turned
+// either way from the left one.
+TEST(StereoVoMatching, SlopeTestRejectsJustAboveKAndKeepsJustBelow) {
+  const double a = 10, h = 60;                   // left flow (a, h); right flow (b, h)
+  const cv::Point2f la(400, 200), ra(300, 200);  // disparity 100
+  for (const int side : {+1, -1}) {
+    for (const double factor : {kInside, kOutside}) {
+      const double t = factor * kSlopeK;
+      // h |a - b| / (a b + h²) = t with b on the given side of a.
+      const double b =
+          side > 0 ? (h * a + t * h * h) / (h - t * a) : (h * a - t * h * h) / (h + t * a);
+      const cv::Point2f lb = la + cv::Point2f(static_cast<float>(a), static_cast<float>(h));
+      const cv::Point2f rb = ra + cv::Point2f(static_cast<float>(b), static_cast<float>(h));
+      const cv::Point2f fl = lb - la, fr = rb - ra;
+      ASSERT_GT(fl.dot(fr), 0.f) << "same direction";
+      ASSERT_NEAR(SlopeTan(fl, fr), t, 1e-4 * kSlopeK);
+      EXPECT_EQ(CloseOne(la, ra, lb, rb), factor < 1 ? "kept" : "slope")
+          << "tan " << SlopeTan(fl, fr) << " (K = " << kSlopeK << "), right flow " << fr
+          << ", left flow " << fl;
+    }
+  }
+}
+
+// The vertical parts of the two flows (the epipolar tolerance at t+1 given it at t) agree
+// within just less or just more than the tolerance, the right one above or below the left one;
+// the lines of both flows are well within K of each other.
+TEST(StereoVoMatching, QuadrilateralFlowsAgreeVerticallyWithinTheEpipolarTolerance) {
+  const cv::Point2f la(400, 200), ra(340, 200), fl(20, 5);
+  for (const int side : {+1, -1}) {
+    for (const double factor : {kInside, kOutside}) {
+      const float dy = static_cast<float>(side * factor * kEpipolarPx);
+      const cv::Point2f fr = fl + cv::Point2f(0, dy);
+      ASSERT_LT(SlopeTan(fl, fr), 0.5 * kSlopeK);
+      EXPECT_EQ(CloseOne(la, ra, la + fl, ra + fr), factor < 1 ? "kept" : "slope")
+          << "vertical flows differ by " << dy << " px (tolerance " << kEpipolarPx << ")";
+    }
+  }
+}
+
+TEST(StereoVoMatching, StereoMatchesLieWithinTheEpipolarToleranceOfTheRow) {
+  // One left feature per row, 60 px apart; its right twin 40 px to the left and just inside or
+  // outside the tolerance above or below.
+  std::vector<cv::Point2f> left, right;
+  std::vector<int> expected;
+  for (const int side : {+1, -1}) {
+    for (const double factor : {kInside, kOutside}) {
+      const float y = 60.f * static_cast<float>(left.size() + 1);
+      left.emplace_back(300.f, y);
+      right.emplace_back(260.f, y + static_cast<float>(side * factor * kEpipolarPx));
+      expected.push_back(factor < 1 ? static_cast<int>(left.size()) - 1 : -1);
+    }
+  }
+  const std::vector<int> seeds = {1, 2, 3, 4};
+  const std::vector<int> m =
+      MatchStereo(MakeFeatures(left, seeds), MakeFeatures(right, seeds), MatchOptions());
+  EXPECT_EQ(m, expected) << "right rows " << right[0].y - left[0].y << ", "
+                         << right[1].y - left[1].y << ", " << right[2].y - left[2].y << ", "
+                         << right[3].y - left[3].y << " px off (tolerance " << kEpipolarPx << ")";
+}
+
+TEST(StereoVoMatching, StereoMatchesHaveDisparityUpToDmax) {
+  const std::vector<cv::Point2f> left = {{600, 100}, {600, 200}};
+  const std::vector<cv::Point2f> right = {
+      {static_cast<float>(600 - kInside * kMaxDisparityPx), 100},
+      {static_cast<float>(600 - kOutside * kMaxDisparityPx), 200}};
+  const std::vector<int> m =
+      MatchStereo(MakeFeatures(left, {1, 2}), MakeFeatures(right, {1, 2}), MatchOptions());
+  EXPECT_EQ(m, (std::vector<int>{0, -1}))
+      << "disparities " << left[0].x - right[0].x << " and " << left[1].x - right[1].x << " (d_max "
+      << kMaxDisparityPx << ")";
+}
+
+// A quadrilateral with disparities da at t and db at t+1 (|da - db| < 70 px), both flows
+// horizontal and forward (the slope and epipolar checks pass).
+std::string CloseWithDisparities(double da, double db) {
+  const cv::Point2f la(560, 100), lb(630, 100);
+  const float fr = static_cast<float>(70 + da - db);  // right flow making db
+  const cv::Point2f ra(static_cast<float>(560 - da), 100);
+  return CloseOne(la, ra, lb, ra + cv::Point2f(fr, 0));
+}
+
+TEST(StereoVoMatching, QuadrilateralDisparitiesAreAtMostDmax) {
+  const double in = kInside * kMaxDisparityPx, out = kOutside * kMaxDisparityPx;
+  EXPECT_EQ(CloseWithDisparities(in, in), "kept") << in << " px at both times";
+  EXPECT_EQ(CloseWithDisparities(out, in), "parallax") << out << " px at t";
+  EXPECT_EQ(CloseWithDisparities(in, out), "parallax") << out << " px at t+1";
+}
+
+TEST(StereoVoMatching, QuadrilateralDisparityChangesAtMostByTheRatio) {
+  const double d = 90;
+  for (const double factor : {kInside, kOutside}) {
+    const double d2 = factor * kMaxDisparityRatio * d;
+    const std::string verdict = factor < 1 ? "kept" : "parallax";
+    EXPECT_EQ(CloseWithDisparities(d, d2), verdict) << d << " -> " << d2 << " px";
+    EXPECT_EQ(CloseWithDisparities(d2, d), verdict) << d2 << " -> " << d << " px";
+  }
 }
 
 TEST(StereoVoMatching, FeaturesAreSpreadOverTheGrid) {

@@ -227,8 +227,7 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
       if (j < 0) continue;
       const Eigen::Vector2d& n = reference[j].n;
       const double e = n.dot(w - reference[j].p);
-      const Eigen::Vector3d J(n.x(), n.y(),
-                              n.x() * (-s * q.x() - c * q.y()) + n.y() * (c * q.x() - s * q.y()));
+      const Eigen::Vector3d J = PoseJacobian(n, q, c, s);
       // Huber weight at 2 x the final pairing distance / 4 keeps outliers from dominating.
       const double k = 0.5 * o.final_correspondence_m;
       const double wgt = std::abs(e) <= k ? 1.0 : k / std::abs(e);
@@ -275,8 +274,7 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
       if (j < 0) continue;
       const Eigen::Vector2d& nj = reference[j].n;
       const double e = nj.dot(w - reference[j].p);
-      const Eigen::Vector3d J(nj.x(), nj.y(),
-                              nj.x() * (-s * q.x() - c * q.y()) + nj.y() * (c * q.x() - s * q.y()));
+      const Eigen::Vector3d J = PoseJacobian(nj, q, c, s);
       Hs.noalias() += J * J.transpose();
       M.noalias() += (e * e) * J * J.transpose();
       e2 += e * e;

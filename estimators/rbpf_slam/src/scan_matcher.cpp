@@ -66,8 +66,8 @@ double Evaluate(const TiledGrid& grid, const std::vector<Eigen::Vector2d>& pts, 
     const double d = grid.Distance(w, &grad);
     cost += d * d;
     if (d >= dmax) continue;
-    const double j0 = grad.x(), j1 = grad.y();
-    const double j2 = grad.x() * (-s * p.x() - c * p.y()) + grad.y() * (c * p.x() - s * p.y());
+    const Eigen::Vector3d J = PoseJacobian(grad, p, c, s);
+    const double j0 = J.x(), j1 = J.y(), j2 = J.z();
     h00 += j0 * j0;
     h01 += j0 * j1;
     h02 += j0 * j2;

@@ -5,7 +5,8 @@
 // that shrinks from max_correspondence_m to final_correspondence_m (Huber-weighted steps).
 //
 // COVARIANCE of (x, y, θ) at the solution, calibrated from the fit itself:
-//   H  = Σ J_iᵀ J_i,  J_i = [ n_jᵀ , n_jᵀ R'(θ) q_i ]          (Gauss-Newton Hessian)
+//   H  = Σ J_iᵀ J_i,  J_i = [ n_jᵀ , n_jᵀ R'(θ) q_i ]          (Gauss-Newton Hessian; J_i is
+//        PoseJacobian(n_j, q_i, cos θ, sin θ) of scan_matcher.hpp)
 //   M  = n/(n−3) Σ e_i² J_iᵀ J_i + min_sigma² H                  (residual-weighted: range noise
 //        of both scans, normal and discretisation errors at this sensor; each pair with its own
 //        residual, since noise depends on range and incidence: a beam grazing a wall has a

@@ -38,6 +38,15 @@ struct MatchResult {
   int evaluations = 0;          // cost evaluations (passes over the points) of the search
 };
 
+// Jacobian over the pose (x, y, θ) of vᵀ (R(θ) p + t) with v held fixed, c = cos θ, s = sin θ:
+// [ vᵀ , vᵀ R'(θ) p ]. With v = ∇d at the world point it is ∂d/∂(x, y, θ) of one scan point (see
+// above); with v the reference normal, the point-to-line Jacobian of one ICP pair (icp.hpp).
+inline Eigen::Vector3d PoseJacobian(const Eigen::Vector2d& v, const Eigen::Vector2d& p, double c,
+                                    double s) {
+  return Eigen::Vector3d(v.x(), v.y(),
+                         v.x() * (-s * p.x() - c * p.y()) + v.y() * (c * p.x() - s * p.y()));
+}
+
 // Projector P (in (x, y, θ)) removing the degenerate components of a step, δ' = P δ, for a
 // Gauss-Newton Hessian H over (x, y, θ): with S = diag(1, 1, 1/L), H_s = S H S = V Λ Vᵀ, the
 // columns v_k with λ_k < ratio · λ_max are degenerate and P = S V_c V_cᵀ S⁻¹ over the others.
