@@ -23,32 +23,6 @@ Eigen::Matrix3d RandomSpd3(std::mt19937* rng) {
   return a * a.transpose() + Eigen::Matrix3d::Identity();
 }
 
-TEST(FusionCostFunctions, SqrtInformationExactGivesOmega) {
-  std::mt19937 rng(1);
-  const Eigen::Matrix3d omega = RandomSpd3(&rng);
-  Eigen::Matrix3d s;
-  ASSERT_TRUE(SqrtInformation<3>(omega, &s));
-  EXPECT_LT((s.transpose() * s - omega).norm(), 1e-9);
-  // Ceres-example convention S = L: S S^T = Omega.
-  ASSERT_TRUE(SqrtInformation<3>(omega, &s, SqrtConvention::kCeresExample));
-  EXPECT_LT((s * s.transpose() - omega).norm(), 1e-9);
-}
-
-TEST(FusionCostFunctions, SqrtInformationRejectsBadMatrices) {
-  Eigen::Matrix3d s;
-  Eigen::Matrix3d m = Eigen::Matrix3d::Identity();
-  m(0, 1) = 0.5;  // not symmetric
-  EXPECT_FALSE(SqrtInformation<3>(m, &s));
-  m = Eigen::Matrix3d::Identity();
-  m(2, 2) = 0.0;  // singular
-  EXPECT_FALSE(SqrtInformation<3>(m, &s));
-  m(2, 2) = -1.0;  // indefinite
-  EXPECT_FALSE(SqrtInformation<3>(m, &s));
-  m(2, 2) = std::nan("");
-  EXPECT_FALSE(SqrtInformation<3>(m, &s));
-  EXPECT_FALSE(SqrtInformation<3>(Eigen::Matrix3d::Zero(), &s));
-}
-
 TEST(FusionCostFunctions, Se2BetweenGradientChecker) {
   std::mt19937 rng(2);
   std::uniform_real_distribution<double> u(-3.0, 3.0);

@@ -1,20 +1,20 @@
 #include "fusionloc/rbpf_slam/pose_graph.hpp"
 
-#include <Eigen/Cholesky>
 #include <cmath>
 #include <stdexcept>
+
+#include "fusionloc/common/sqrt_information.hpp"
 
 namespace fl::rbpf {
 
 ceres::CostFunction* RelativePose2Cost::Create(const fl::Pose2& T_i_j,
                                                const Eigen::Matrix3d& information) {
-  // S with SᵀS = Ω: the transpose of the lower Cholesky factor (Ω = L Lᵀ → S = Lᵀ).
+  // The information of an ICP fit may be asymmetric by rounding: use its symmetric part.
   const Eigen::Matrix3d sym = 0.5 * (information + information.transpose());
-  Eigen::LLT<Eigen::Matrix3d> llt(sym);
-  if (llt.info() != Eigen::Success) {
+  Eigen::Matrix3d S;
+  if (!fl::SqrtInformation<3>(sym, &S)) {
     throw std::invalid_argument("RelativePose2Cost: information matrix is not positive definite");
   }
-  const Eigen::Matrix3d S = llt.matrixL().transpose();
   return new RelativePose2Cost(T_i_j, S);
 }
 

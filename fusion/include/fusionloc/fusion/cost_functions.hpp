@@ -1,47 +1,21 @@
 // Ceres cost functors of the fusion back-end: SE(2) between, SE(2) prior, SE(3) between.
 //
 // Every factor's cost is d(e) = e^T Omega e (MSIF eqs. 11-12) written as a least-squares
-// residual r = S e with S^T S = Omega, so that Ceres' 1/2 |r|^2 = 1/2 d(e).
-// SqrtInformation() below computes S = L^T from the Cholesky factor Omega = L L^T.
-//
-// Note on Ceres' own pose-graph examples (examples/slam/pose_graph_{2d,3d}): they use
-// S = L (not L^T), i.e. |L e|^2 = e^T L^T L e, which equals e^T Omega e only for diagonal
-// Omega. The benchmark reproduces their reference costs with SqrtConvention::kCeresExample;
-// the fusion always uses the exact kExact convention. Both are just an S handed to the
-// same functors.
+// residual r = S e with S^T S = Omega, so that Ceres' 1/2 |r|^2 = 1/2 d(e); S comes from
+// fl::SqrtInformation (fusionloc/common/sqrt_information.hpp, which also explains the
+// SqrtConvention the g2o benchmark uses to reproduce Ceres' example costs).
 #pragma once
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
-#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "fusionloc/common/sqrt_information.hpp"
+
 namespace fl::fusion {
-
-enum class SqrtConvention {
-  kExact,         // S = L^T, |S e|^2 = e^T Omega e
-  kCeresExample,  // S = L, as Ceres' pose_graph examples (exact only for diagonal Omega)
-};
-
-// S with S^T S = Omega (kExact). Returns false if Omega is not symmetric positive definite.
-template <int N>
-bool SqrtInformation(const Eigen::Matrix<double, N, N>& information,
-                     Eigen::Matrix<double, N, N>* sqrt_information,
-                     SqrtConvention convention = SqrtConvention::kExact) {
-  if (!information.allFinite()) return false;
-  const double scale = information.cwiseAbs().maxCoeff();
-  if (!(scale > 0.0)) return false;
-  if ((information - information.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale) return false;
-  Eigen::LLT<Eigen::Matrix<double, N, N>> llt(information);
-  if (llt.info() != Eigen::Success) return false;
-  const Eigen::Matrix<double, N, N> l = llt.matrixL();
-  if (l.diagonal().minCoeff() <= 1e-12 * std::sqrt(scale)) return false;
-  *sqrt_information = convention == SqrtConvention::kExact ? l.transpose() : l;
-  return true;
-}
 
 // Wraps an angle to [-pi, pi), also for Jets (same formula as Ceres' NormalizeAngle).
 template <typename T>
