@@ -23,46 +23,6 @@ Eigen::Matrix3d RandomSpd3(std::mt19937* rng) {
   return a * a.transpose() + Eigen::Matrix3d::Identity();
 }
 
-TEST(FusionCostFunctions, Se2BetweenGradientChecker) {
-  std::mt19937 rng(2);
-  std::uniform_real_distribution<double> u(-3.0, 3.0);
-  Pose2Manifold manifold;
-  const std::vector<const ceres::Manifold*> manifolds = {&manifold, &manifold};
-  for (int trial = 0; trial < 20; ++trial) {
-    const Eigen::Vector3d meas(u(rng), u(rng), u(rng));
-    Eigen::Matrix3d s;
-    ASSERT_TRUE(SqrtInformation<3>(RandomSpd3(&rng), &s));
-    std::unique_ptr<ceres::CostFunction> cost(Se2BetweenCost::Create(meas, s));
-    ceres::GradientChecker checker(cost.get(), &manifolds, CheckerOptions());
-    double pi[3] = {u(rng), u(rng), u(rng)};
-    double pj[3] = {u(rng), u(rng), u(rng)};
-    const double* params[2] = {pi, pj};
-    ceres::GradientChecker::ProbeResults results;
-    EXPECT_TRUE(checker.Probe(params, 1e-7, &results)) << results.error_log;
-  }
-}
-
-TEST(FusionCostFunctions, Se2BetweenZeroAtTruthAndWrapsAngle) {
-  // Node i faces almost -x (heading pi - 0.01); node j is 1 m ahead and 0.02 rad further
-  // left, i.e. across the +-pi cut. The residual must be zero, not 2 pi.
-  const double ti = M_PI - 0.01;
-  const double pi[3] = {1.0, 2.0, ti};
-  const double pj[3] = {1.0 + std::cos(ti), 2.0 + std::sin(ti), ti + 0.02 - 2.0 * M_PI};
-  std::unique_ptr<ceres::CostFunction> cost(
-      Se2BetweenCost::Create(Eigen::Vector3d(1.0, 0.0, 0.02), Eigen::Matrix3d::Identity()));
-  const double* params[2] = {pi, pj};
-  double r[3];
-  ASSERT_TRUE(cost->Evaluate(params, r, nullptr));
-  for (double v : r) EXPECT_NEAR(v, 0.0, 1e-12);
-  // A wrong measurement gives the expected whitened residual.
-  std::unique_ptr<ceres::CostFunction> off(
-      Se2BetweenCost::Create(Eigen::Vector3d(1.0, 0.0, 0.02), 2.0 * Eigen::Matrix3d::Identity()));
-  const double pj2[3] = {pj[0], pj[1], pj[2] + 0.1};
-  const double* params2[2] = {pi, pj2};
-  ASSERT_TRUE(off->Evaluate(params2, r, nullptr));
-  EXPECT_NEAR(r[2], 0.2, 1e-12);
-}
-
 TEST(FusionCostFunctions, Se2PriorGradientChecker) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-3.0, 3.0);

@@ -1,4 +1,6 @@
-// Ceres cost functors of the fusion back-end: SE(2) between, SE(2) prior, SE(3) between.
+// Ceres cost functors of the fusion back-end: SE(2) prior, SE(3) between. The SE(2) between
+// factor (laser eqs. 13-15, vision eqs. 17-19 reduced to the plane, wheel odometry) is
+// fl::Se2BetweenCost (fusionloc/common/se2_between_cost.hpp), shared with the RBPF.
 //
 // Every factor's cost is d(e) = e^T Omega e (MSIF eqs. 11-12) written as a least-squares
 // residual r = S e with S^T S = Omega, so that Ceres' 1/2 |r|^2 = 1/2 d(e); S comes from
@@ -13,6 +15,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "fusionloc/common/se2_between_cost.hpp"
 #include "fusionloc/common/sqrt_information.hpp"
 
 namespace fl::fusion {
@@ -53,66 +56,6 @@ class Pose2Manifold final : public ceres::Manifold {
     jac.setIdentity();
     return true;
   }
-};
-
-// SE(2) between factor (laser eqs. 13-15, vision eqs. 17-19 reduced to the plane, wheel
-// odometry). Parameter blocks: pose_i = [x_i, y_i, theta_i] = T_map_i and pose_j likewise.
-// Measurement: T_i_j = (p_ij, theta_ij), the pose of node j in the frame of node i.
-//
-//   e = [ R(theta_i)^T (p_j - p_i) - p_ij        ]   (2-vector, metres, frame i)
-//       [ Normalize(theta_j - theta_i - theta_ij) ]   (radians, wrapped to [-pi, pi))
-//   r = S e,  S^T S = Omega_ij (3x3, order x, y, theta)
-//
-// Analytic Jacobians (d = p_j - p_i, R^T = [c s; -s c]):
-//   de/dp_i = [-R^T; 0 0]      de/dtheta_i = [ dR^T/dtheta d ; -1 ],  dR^T/dtheta = [-s c; -c -s]
-//   de/dp_j = [ R^T; 0 0]      de/dtheta_j = [ 0 ; 0 ; 1 ]
-class Se2BetweenCost final : public ceres::SizedCostFunction<3, 3, 3> {
- public:
-  Se2BetweenCost(const Eigen::Vector3d& T_i_j, const Eigen::Matrix3d& sqrt_information)
-      : T_i_j_(T_i_j), sqrt_information_(sqrt_information) {}
-
-  static ceres::CostFunction* Create(const Eigen::Vector3d& T_i_j,
-                                     const Eigen::Matrix3d& sqrt_information) {
-    return new Se2BetweenCost(T_i_j, sqrt_information);
-  }
-
-  bool Evaluate(double const* const* parameters, double* residuals,
-                double** jacobians) const override {
-    const double* pi = parameters[0];
-    const double* pj = parameters[1];
-    const double c = std::cos(pi[2]), s = std::sin(pi[2]);
-    const double dx = pj[0] - pi[0], dy = pj[1] - pi[1];
-    Eigen::Vector3d e;
-    e[0] = c * dx + s * dy - T_i_j_[0];
-    e[1] = -s * dx + c * dy - T_i_j_[1];
-    e[2] = NormalizeAngle(pj[2] - pi[2] - T_i_j_[2]);
-    Eigen::Map<Eigen::Vector3d> r(residuals);
-    r = sqrt_information_ * e;
-    if (jacobians == nullptr) return true;
-    if (jacobians[0] != nullptr) {
-      Eigen::Matrix3d j;
-      j << -c, -s, -s * dx + c * dy,  //
-          s, -c, -c * dx - s * dy,    //
-          0, 0, -1;
-      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> jac(jacobians[0]);
-      jac = sqrt_information_ * j;
-    }
-    if (jacobians[1] != nullptr) {
-      Eigen::Matrix3d j;
-      j << c, s, 0,  //
-          -s, c, 0,  //
-          0, 0, 1;
-      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> jac(jacobians[1]);
-      jac = sqrt_information_ * j;
-    }
-    return true;
-  }
-
-  const Eigen::Vector3d& measurement() const { return T_i_j_; }
-
- private:
-  Eigen::Vector3d T_i_j_;  // (x, y, theta) of node j in node i
-  Eigen::Matrix3d sqrt_information_;
 };
 
 // SE(2) prior factor on one pose (the first pose of the graph, fixing the gauge).
