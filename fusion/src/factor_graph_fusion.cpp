@@ -363,7 +363,7 @@ Status FactorGraphFusion::AttachFactor(const RelativePoseFactor& f, const Pose2&
   factor.is_loop_closure = f.is_loop_closure;
   Eigen::Matrix3d sqrt_info;
   SqrtInformation<3>(information, &sqrt_info);  // checked by ReduceInformationToPlanar
-  factor.cost.reset(Se2BetweenCost::Create(ToVector(factor.T_i_j), sqrt_info));
+  factor.cost.reset(Se2BetweenCost::Create(factor.T_i_j, sqrt_info));
   if (f.source != FactorSource::kWheelOdometry) factor.loss = robust_loss_;
   if (f.is_loop_closure && options_.full_solve_on_loop_closure) full_solve_requested_ = true;
   AddGraphFactor(std::move(factor));
@@ -413,7 +413,7 @@ void FactorGraphFusion::AddSequentialFactor(int j, const Pose2& motion, double s
   factor.T_i_j = motion;
   factor.information = sqrt_info.cwiseAbs2().asDiagonal();
   factor.source = source;
-  factor.cost.reset(Se2BetweenCost::Create(ToVector(motion), sqrt_info.asDiagonal()));
+  factor.cost.reset(Se2BetweenCost::Create(motion, sqrt_info.asDiagonal()));
   factor.loss = std::move(loss);
   AddGraphFactor(std::move(factor));
 }

@@ -35,7 +35,8 @@ Status OptimizePoseGraph(G2oGraph* graph, const PoseGraphSolveOptions& options,
         return Status::Error(EdgeName("EDGE_SE2", k, e.id_i, e.id_j) +
                              ": information matrix is not symmetric positive definite");
       }
-      problem.AddResidualBlock(Se2BetweenCost::Create(e.T_i_j, sqrt_info), nullptr,
+      const Pose2 T_i_j(e.T_i_j[0], e.T_i_j[1], e.T_i_j[2]);
+      problem.AddResidualBlock(Se2BetweenCost::Create(T_i_j, sqrt_info), nullptr,
                                graph->poses2.at(e.id_i).data(), graph->poses2.at(e.id_j).data());
     }
     for (auto& [id, pose] : graph->poses2) {

@@ -1,6 +1,5 @@
 #include "fusionloc/rbpf_slam/pose_graph.hpp"
 
-#include <ceres/gradient_checker.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,31 +9,6 @@
 
 namespace fl::rbpf {
 namespace {
-
-TEST(RelativePose2Cost, GradientCheck) {
-  Eigen::Matrix3d info;
-  info << 400, 20, 5, 20, 300, -4, 5, -4, 900;
-  std::unique_ptr<ceres::CostFunction> cost(
-      RelativePose2Cost::Create(fl::Pose2(1.0, -0.3, 0.4), info));
-  double xi[3] = {0.2, -0.4, 3.0};  // near ±π: the wrap must not break derivatives
-  double xj[3] = {1.1, 0.5, -2.9};
-  std::vector<double*> params = {xi, xj};
-  ceres::NumericDiffOptions nd;
-  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
-  ceres::GradientChecker checker(cost.get(), no_manifolds, nd);
-  ceres::GradientChecker::ProbeResults results;
-  EXPECT_TRUE(checker.Probe(params.data(), 1e-7, &results)) << results.error_log;
-}
-
-TEST(RelativePose2Cost, ZeroAtTheMeasurement) {
-  const fl::Pose2 a(1, 2, 0.5), T(0.3, -0.2, 0.1);
-  const fl::Pose2 b = a * T;
-  std::unique_ptr<ceres::CostFunction> cost(RelativePose2Cost::Create(T, Eigen::Matrix3d::Identity()));
-  double xi[3] = {a.x, a.y, a.theta}, xj[3] = {b.x, b.y, b.theta}, r[3];
-  const double* p[] = {xi, xj};
-  ASSERT_TRUE(cost->Evaluate(p, r, nullptr));
-  EXPECT_NEAR(Eigen::Vector3d(r[0], r[1], r[2]).norm(), 0.0, 1e-12);
-}
 
 // A square of 4 x 10 steps of 0.5 m with exact odometry edges and a loop closure (Huber 1) from
 // the last node to the first; the initial values drift by `drift_rad` of heading per step.

@@ -1,51 +1,12 @@
 #include "fusionloc/rbpf_slam/pose_graph.hpp"
 
-#include <Eigen/Cholesky>
-#include <cmath>
 #include <stdexcept>
+#include <string>
+
+#include "fusionloc/common/se2_between_cost.hpp"
+#include "fusionloc/common/sqrt_information.hpp"
 
 namespace fl::rbpf {
-
-ceres::CostFunction* RelativePose2Cost::Create(const fl::Pose2& T_i_j,
-                                               const Eigen::Matrix3d& information) {
-  // S with SᵀS = Ω: the transpose of the lower Cholesky factor (Ω = L Lᵀ → S = Lᵀ).
-  const Eigen::Matrix3d sym = 0.5 * (information + information.transpose());
-  Eigen::LLT<Eigen::Matrix3d> llt(sym);
-  if (llt.info() != Eigen::Success) {
-    throw std::invalid_argument("RelativePose2Cost: information matrix is not positive definite");
-  }
-  const Eigen::Matrix3d S = llt.matrixL().transpose();
-  return new RelativePose2Cost(T_i_j, S);
-}
-
-bool RelativePose2Cost::Evaluate(double const* const* parameters, double* residuals,
-                                 double** jacobians) const {
-  const double* x_i = parameters[0];
-  const double* x_j = parameters[1];
-  const double c = std::cos(x_i[2]), s = std::sin(x_i[2]);
-  const double dx = x_j[0] - x_i[0], dy = x_j[1] - x_i[1];
-  const double u = c * dx + s * dy, v = -s * dx + c * dy;
-  const double a = x_j[2] - x_i[2] - T_i_j_.theta;
-  const double two_pi = 2.0 * M_PI;
-  const Eigen::Vector3d e(u - T_i_j_.x, v - T_i_j_.y, a - two_pi * std::floor((a + M_PI) / two_pi));
-  Eigen::Map<Eigen::Vector3d> r(residuals);
-  r = sqrt_info_ * e;
-  if (!jacobians) return true;
-  using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
-  if (jacobians[0]) {
-    RowMajor3 de;
-    de << -c, -s, v, s, -c, -u, 0.0, 0.0, -1.0;
-    Eigen::Map<RowMajor3> J_i(jacobians[0]);
-    J_i = sqrt_info_ * de;
-  }
-  if (jacobians[1]) {
-    RowMajor3 de;
-    de << c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0;
-    Eigen::Map<RowMajor3> J_j(jacobians[1]);
-    J_j = sqrt_info_ * de;
-  }
-  return true;
-}
 
 int PoseGraph2D::AddNode(const fl::Pose2& T) {
   nodes_.push_back({T.x, T.y, T.theta});
@@ -68,8 +29,16 @@ void PoseGraph2D::SyncProblem() {
   for (; edges_in_problem_ < num_edges(); ++edges_in_problem_) {
     const PoseGraphEdge& e = edges_[edges_in_problem_];
     if (!e.enabled) continue;
+    // The information of an ICP fit may be asymmetric by rounding: use its symmetric part.
+    Eigen::Matrix3d S;
+    if (!fl::SqrtInformation<3>(Eigen::Matrix3d(0.5 * (e.information + e.information.transpose())),
+                                &S)) {
+      throw std::invalid_argument("PoseGraph2D: information matrix of edge " +
+                                  std::to_string(e.i) + " -> " + std::to_string(e.j) +
+                                  " is not positive definite");
+    }
     ceres::LossFunction* loss = e.huber_scale > 0 ? new ceres::HuberLoss(e.huber_scale) : nullptr;
-    problem_->AddResidualBlock(RelativePose2Cost::Create(e.T_i_j, e.information), loss,
+    problem_->AddResidualBlock(fl::Se2BetweenCost::Create(e.T_i_j, S), loss,
                                nodes_[e.i].data(), nodes_[e.j].data());
   }
   double* first = nodes_[0].data();

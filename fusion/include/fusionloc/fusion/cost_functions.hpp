@@ -1,47 +1,24 @@
-// Ceres cost functors of the fusion back-end: SE(2) between, SE(2) prior, SE(3) between.
+// Ceres cost functors of the fusion back-end: SE(2) prior, SE(3) between. The SE(2) between
+// factor (laser eqs. 13-15, vision eqs. 17-19 reduced to the plane, wheel odometry) is
+// fl::Se2BetweenCost (fusionloc/common/se2_between_cost.hpp), shared with the RBPF.
 //
 // Every factor's cost is d(e) = e^T Omega e (MSIF eqs. 11-12) written as a least-squares
-// residual r = S e with S^T S = Omega, so that Ceres' 1/2 |r|^2 = 1/2 d(e).
-// SqrtInformation() below computes S = L^T from the Cholesky factor Omega = L L^T.
-//
-// Note on Ceres' own pose-graph examples (examples/slam/pose_graph_{2d,3d}): they use
-// S = L (not L^T), i.e. |L e|^2 = e^T L^T L e, which equals e^T Omega e only for diagonal
-// Omega. The benchmark reproduces their reference costs with SqrtConvention::kCeresExample;
-// the fusion always uses the exact kExact convention. Both are just an S handed to the
-// same functors.
+// residual r = S e with S^T S = Omega, so that Ceres' 1/2 |r|^2 = 1/2 d(e); S comes from
+// fl::SqrtInformation (fusionloc/common/sqrt_information.hpp, which also explains the
+// SqrtConvention the g2o benchmark uses to reproduce Ceres' example costs).
 #pragma once
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
-#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "fusionloc/common/se2_between_cost.hpp"
+#include "fusionloc/common/sqrt_information.hpp"
+
 namespace fl::fusion {
-
-enum class SqrtConvention {
-  kExact,         // S = L^T, |S e|^2 = e^T Omega e
-  kCeresExample,  // S = L, as Ceres' pose_graph examples (exact only for diagonal Omega)
-};
-
-// S with S^T S = Omega (kExact). Returns false if Omega is not symmetric positive definite.
-template <int N>
-bool SqrtInformation(const Eigen::Matrix<double, N, N>& information,
-                     Eigen::Matrix<double, N, N>* sqrt_information,
-                     SqrtConvention convention = SqrtConvention::kExact) {
-  if (!information.allFinite()) return false;
-  const double scale = information.cwiseAbs().maxCoeff();
-  if (!(scale > 0.0)) return false;
-  if ((information - information.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale) return false;
-  Eigen::LLT<Eigen::Matrix<double, N, N>> llt(information);
-  if (llt.info() != Eigen::Success) return false;
-  const Eigen::Matrix<double, N, N> l = llt.matrixL();
-  if (l.diagonal().minCoeff() <= 1e-12 * std::sqrt(scale)) return false;
-  *sqrt_information = convention == SqrtConvention::kExact ? l.transpose() : l;
-  return true;
-}
 
 // Wraps an angle to [-pi, pi), also for Jets (same formula as Ceres' NormalizeAngle).
 template <typename T>
@@ -79,66 +56,6 @@ class Pose2Manifold final : public ceres::Manifold {
     jac.setIdentity();
     return true;
   }
-};
-
-// SE(2) between factor (laser eqs. 13-15, vision eqs. 17-19 reduced to the plane, wheel
-// odometry). Parameter blocks: pose_i = [x_i, y_i, theta_i] = T_map_i and pose_j likewise.
-// Measurement: T_i_j = (p_ij, theta_ij), the pose of node j in the frame of node i.
-//
-//   e = [ R(theta_i)^T (p_j - p_i) - p_ij        ]   (2-vector, metres, frame i)
-//       [ Normalize(theta_j - theta_i - theta_ij) ]   (radians, wrapped to [-pi, pi))
-//   r = S e,  S^T S = Omega_ij (3x3, order x, y, theta)
-//
-// Analytic Jacobians (d = p_j - p_i, R^T = [c s; -s c]):
-//   de/dp_i = [-R^T; 0 0]      de/dtheta_i = [ dR^T/dtheta d ; -1 ],  dR^T/dtheta = [-s c; -c -s]
-//   de/dp_j = [ R^T; 0 0]      de/dtheta_j = [ 0 ; 0 ; 1 ]
-class Se2BetweenCost final : public ceres::SizedCostFunction<3, 3, 3> {
- public:
-  Se2BetweenCost(const Eigen::Vector3d& T_i_j, const Eigen::Matrix3d& sqrt_information)
-      : T_i_j_(T_i_j), sqrt_information_(sqrt_information) {}
-
-  static ceres::CostFunction* Create(const Eigen::Vector3d& T_i_j,
-                                     const Eigen::Matrix3d& sqrt_information) {
-    return new Se2BetweenCost(T_i_j, sqrt_information);
-  }
-
-  bool Evaluate(double const* const* parameters, double* residuals,
-                double** jacobians) const override {
-    const double* pi = parameters[0];
-    const double* pj = parameters[1];
-    const double c = std::cos(pi[2]), s = std::sin(pi[2]);
-    const double dx = pj[0] - pi[0], dy = pj[1] - pi[1];
-    Eigen::Vector3d e;
-    e[0] = c * dx + s * dy - T_i_j_[0];
-    e[1] = -s * dx + c * dy - T_i_j_[1];
-    e[2] = NormalizeAngle(pj[2] - pi[2] - T_i_j_[2]);
-    Eigen::Map<Eigen::Vector3d> r(residuals);
-    r = sqrt_information_ * e;
-    if (jacobians == nullptr) return true;
-    if (jacobians[0] != nullptr) {
-      Eigen::Matrix3d j;
-      j << -c, -s, -s * dx + c * dy,  //
-          s, -c, -c * dx - s * dy,    //
-          0, 0, -1;
-      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> jac(jacobians[0]);
-      jac = sqrt_information_ * j;
-    }
-    if (jacobians[1] != nullptr) {
-      Eigen::Matrix3d j;
-      j << c, s, 0,  //
-          -s, c, 0,  //
-          0, 0, 1;
-      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> jac(jacobians[1]);
-      jac = sqrt_information_ * j;
-    }
-    return true;
-  }
-
-  const Eigen::Vector3d& measurement() const { return T_i_j_; }
-
- private:
-  Eigen::Vector3d T_i_j_;  // (x, y, theta) of node j in node i
-  Eigen::Matrix3d sqrt_information_;
 };
 
 // SE(2) prior factor on one pose (the first pose of the graph, fixing the gauge).

@@ -1,4 +1,5 @@
-// A 2D pose graph (keyframes + relative-pose edges) optimised with Ceres.
+// A 2D pose graph (keyframes + relative-pose edges) optimised with Ceres; each edge is an
+// fl::Se2BetweenCost (fusionloc/common/se2_between_cost.hpp).
 #pragma once
 
 #include <ceres/ceres.h>
@@ -12,34 +13,6 @@
 #include "fusionloc/common/geometry.hpp"
 
 namespace fl::rbpf {
-
-// Residual of one relative-pose edge between nodes i and j (world poses x = (x, y, θ)):
-//   (u, v) = R(θ_i)ᵀ (t_j − t_i)                 (translation of j in frame i)
-//   e_t = (u, v) − t_ij
-//   e_θ = wrap(θ_j − θ_i − θ_ij)                 (wrap to [−π, π): a constant shift of 2πk)
-//   r   = S (e_t, e_θ),  S = upper-triangular square root of the information: SᵀS = Ω_ij.
-// Analytic Jacobians (c = cos θ_i, s = sin θ_i):
-//   ∂e/∂x_i = [ −c  −s   v ]      ∂e/∂x_j = [  c   s   0 ]
-//             [  s  −c  −u ]                [ −s   c   0 ]
-//             [  0   0  −1 ]                [  0   0   1 ]
-//   ∂r/∂x = S ∂e/∂x. (They replaced AutoDiff: the pose-graph solves are a third of the run on
-//   intel; a GradientChecker test holds them to the numeric derivatives.)
-class RelativePose2Cost : public ceres::SizedCostFunction<3, 3, 3> {
- public:
-  RelativePose2Cost(const fl::Pose2& T_i_j, const Eigen::Matrix3d& sqrt_information)
-      : T_i_j_(T_i_j), sqrt_info_(sqrt_information) {}
-
-  // parameters[0] = pose_world_i, parameters[1] = pose_world_j (x, y, θ each).
-  bool Evaluate(double const* const* parameters, double* residuals,
-                double** jacobians) const override;
-
-  // Throws std::invalid_argument if `information` is not positive definite.
-  static ceres::CostFunction* Create(const fl::Pose2& T_i_j, const Eigen::Matrix3d& information);
-
- private:
-  fl::Pose2 T_i_j_;
-  Eigen::Matrix3d sqrt_info_;
-};
 
 struct PoseGraphEdge {
   int i = 0;
