@@ -2,18 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include "test_paths.hpp"
+
 namespace fl {
 namespace {
 
-struct Args {
-  std::vector<std::string> storage;
-  std::vector<char*> ptrs;
-  explicit Args(std::vector<std::string> a) : storage(std::move(a)) {
-    for (auto& s : storage) ptrs.push_back(s.data());
-  }
-  int argc() { return static_cast<int>(ptrs.size()); }
-  char** argv() { return ptrs.data(); }
-};
+using test::Args;
 
 TEST(CommandLine, ParsesFlagsAndPositionals) {
   CommandLine cli("fl-x", "test");

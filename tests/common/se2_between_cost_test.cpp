@@ -9,23 +9,13 @@
 
 #include "fusionloc/common/sqrt_information.hpp"
 
+#include "cost_fixtures.hpp"
+
 namespace fl {
 namespace {
 
-// Ridders' extrapolation from a smaller first step than the default 1e-2 (relative): with
-// parameters of magnitude ~3 the default first step spans a large part of a sine period.
-ceres::NumericDiffOptions CheckerOptions() {
-  ceres::NumericDiffOptions nd;
-  nd.ridders_relative_initial_step_size = 1e-4;
-  return nd;
-}
-
-Eigen::Matrix3d RandomSpd3(std::mt19937* rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  Eigen::Matrix3d a;
-  for (int i = 0; i < 9; ++i) a.data()[i] = n(*rng);
-  return a * a.transpose() + Eigen::Matrix3d::Identity();
-}
+using test::CheckerOptions;
+using test::RandomSpd3;
 
 bool Probe(const ceres::CostFunction& cost, double* T_world_i, double* T_world_j,
            std::string* log) {

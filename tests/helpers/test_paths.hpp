@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace fl::test {
 
@@ -34,6 +35,17 @@ class TempDir {
 
  private:
   std::string path_;
+};
+
+// argc/argv for a parser under test: Args a({"fl-x", "--n", "7"}); cli.Parse(a.argc(), a.argv()).
+struct Args {
+  std::vector<std::string> storage;
+  std::vector<char*> ptrs;
+  explicit Args(std::vector<std::string> a) : storage(std::move(a)) {
+    for (auto& s : storage) ptrs.push_back(s.data());
+  }
+  int argc() { return static_cast<int>(ptrs.size()); }
+  char** argv() { return ptrs.data(); }
 };
 
 // What a shell command did: its exit status (-1 if killed by a signal), stdout and stderr.
