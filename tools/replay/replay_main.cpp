@@ -38,8 +38,9 @@ class ProgressBar {
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
     const int decile = static_cast<int>(fraction * 10);
-    if (!tty_ && decile <= last_decile_ && fraction < 1.0) return;
+    if (done_ || (!tty_ && decile <= last_decile_ && fraction < 1.0)) return;
     last_decile_ = decile;
+    done_ = fraction >= 1.0;
     const int width = 30, filled = static_cast<int>(std::lround(fraction * width));
     const double eta = fraction > 0.01 ? elapsed * (1.0 - fraction) / fraction : 0.0;
     char line[200];
@@ -57,6 +58,7 @@ class ProgressBar {
   bool tty_;
   std::chrono::steady_clock::time_point start_;
   int last_decile_ = -1;
+  bool done_ = false;
 };
 
 // ./config if it is there, else the source tree's config/ beside build/bin/fl-replay.
