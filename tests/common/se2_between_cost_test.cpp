@@ -7,9 +7,8 @@
 #include <random>
 #include <vector>
 
-#include "fusionloc/common/sqrt_information.hpp"
-
 #include "cost_fixtures.hpp"
+#include "fusionloc/common/sqrt_information.hpp"
 
 namespace fl {
 namespace {
