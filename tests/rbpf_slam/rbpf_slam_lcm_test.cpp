@@ -20,14 +20,15 @@ struct Handed {
   Utime utime;
   bool has_odom;
   Pose2 odom;
+  std::string reason;  // why there is no odometry ("" when there is)
 };
 
 std::vector<Handed> Drain(ScanOdometrySync* sync, bool flush, std::vector<std::string>* warnings) {
   std::vector<Handed> out;
   sync->Process(
       flush,
-      [&](const LaserScan& s, const Pose2* o, const Status&) {
-        out.push_back({s.utime, o != nullptr, o ? *o : Pose2()});
+      [&](const LaserScan& s, const Pose2* o, const Status& lookup) {
+        out.push_back({s.utime, o != nullptr, o ? *o : Pose2(), lookup.message()});
       },
       [&](const std::string& w) { warnings->push_back(w); });
   return out;
@@ -67,6 +68,8 @@ TEST(ScanOdometrySync, AScanWithoutOdometryIsHandedOnAfterTheLatencyWithTheReaso
   ASSERT_EQ(h.size(), 2u);
   EXPECT_EQ(h[0].utime, 500000);
   EXPECT_FALSE(h[0].has_odom);
+  EXPECT_NE(h[0].reason.find("no odometry around utime 500000"), std::string::npos)
+      << h[0].reason;
   EXPECT_EQ(h[1].utime, 600000);
   h = Drain(&sync, true, &warnings);  // the end: everything still waiting goes
   ASSERT_EQ(h.size(), 3u);
@@ -77,11 +80,16 @@ TEST(ScanOdometrySync, TimeGoingBackwardsIsRefusedAndWithoutOdometryScansGoAtOnc
   ScanOdometrySync sync(0.3, false);
   std::vector<std::string> warnings;
   ASSERT_TRUE(sync.PushScan(Scan(100000)).ok());
-  EXPECT_FALSE(sync.PushScan(Scan(50000)).ok());
+  const Status back = sync.PushScan(Scan(50000));
+  EXPECT_FALSE(back.ok());
+  EXPECT_NE(back.message().find("time went backwards"), std::string::npos) << back.message();
   EXPECT_TRUE(sync.PushOdometry(0, Pose2()).ok());  // ignored without odometry
-  const auto h = Drain(&sync, true, &warnings);
+  const auto h = Drain(&sync, false, &warnings);    // no flush: nothing to wait for
   ASSERT_EQ(h.size(), 1u);
+  EXPECT_EQ(h[0].utime, 100000);
   EXPECT_FALSE(h[0].has_odom);
+  EXPECT_EQ(h[0].reason, "");
+  EXPECT_EQ(sync.waiting(), 0u);
 }
 
 TEST(RbpfSlamLcm, FactorAndGridConversions) {
