@@ -34,14 +34,6 @@ Options LoadStageOptions(const std::string& dir, const std::string& file) {
   return LoadYamlFile<Options>((std::filesystem::path(dir) / file).string());
 }
 
-std::string StatusChannel(const std::string& program) {
-  std::string s = channels::kStatusPrefix;
-  for (char c : program) {
-    s += std::isalnum(static_cast<unsigned char>(c)) ? static_cast<char>(std::toupper(c)) : '_';
-  }
-  return s;
-}
-
 }  // namespace
 
 ReplayReport RunReplay(const ReplayOptions& options,
@@ -104,21 +96,17 @@ ReplayReport RunReplay(const ReplayOptions& options,
     raw.push_back(n.get());
     for (const auto& ch : n->RequiredInputs()) watch.Watch(ch, n.get());
   }
-  Utime first = 0, last = 0;
-  bool any = false;
-  lcm->SubscribeRaw(".*", [&](const std::string&, const void*, int, Utime utime) {
-    if (!any) first = utime;
-    any = true;
-    last = std::max(last, utime);
-  });
-
+  auto data_span_s = [&lcm] {
+    Utime first = 0, last = 0;
+    return lcm->LogTimeSpan(&first, &last) ? UtimeToSeconds(last - first) : 0.0;
+  };
   const auto t0 = std::chrono::steady_clock::now();
   SpinNodes(lcm.get(), raw, &watch, [&](double fraction) {
-    if (progress) progress(fraction, any ? UtimeToSeconds(last - first) : 0.0);
+    if (progress) progress(fraction, data_span_s());
   });
   ReplayReport report;
   report.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  report.data_s = any ? UtimeToSeconds(last - first) : 0.0;
+  report.data_s = data_span_s();
   report.input_channels = lcm->LogChannelCounts();
   for (const auto& kv : report.input_channels) {
     if (lo.drop_channels.count(kv.first)) report.replaced[kv.first] = kv.second;
@@ -141,13 +129,11 @@ ReplayReport RunReplay(const ReplayOptions& options,
     s.summary = n->Summary();
     report.stages.push_back(std::move(s));
   }
-  report.events_out = lcm->messages_published() + (options.out_path.empty() ? 0 : [&] {
-                        int64_t n = 0;
-                        for (const auto& kv : report.input_channels) {
-                          if (!lo.drop_channels.count(kv.first)) n += kv.second;
-                        }
-                        return n;
-                      }());
+  // What went to out_path: every published message and the delivered inputs.
+  report.events_out = lcm->messages_published();
+  for (const auto& kv : report.input_channels) {
+    if (!lo.drop_channels.count(kv.first)) report.events_out += kv.second;
+  }
   nodes.clear();
   lcm.reset();  // closes (and renames into place) the output log
   if (!any_stage_ran) {

@@ -38,7 +38,7 @@ struct ReplayReport {
   std::vector<StageReport> stages;
   std::map<std::string, int64_t> input_channels;  // events of the input log per channel
   std::map<std::string, int64_t> replaced;        // recorded outputs left out, per channel
-  int64_t events_out = 0;                         // events written to out_path
+  int64_t events_out = 0;                         // events written to out_path, if any
   double wall_s = 0.0;                            // [s] wall time of the replay
   double data_s = 0.0;                            // [s] span of data time replayed
 };

@@ -157,6 +157,12 @@ class LcmLogReplay final : public LcmInterface {
   bool replaying() const override { return true; }
   std::map<std::string, int64_t> LogChannelCounts() const override { return counts_; }
   std::string LogProblems() const override { return reader_.ProblemSummary(); }
+  bool LogTimeSpan(Utime* first, Utime* last) const override {
+    if (counts_.empty()) return false;
+    *first = oldest_read_;
+    *last = newest_read_;
+    return true;
+  }
   double LogProgress() const override {
     if (finished_) return 1.0;
     return reader_.file_size() > 0
@@ -226,8 +232,9 @@ class LcmLogReplay final : public LcmInterface {
         break;
       }
       ++counts_[p.event.channel];
-      if (options_.drop_channels.count(p.event.channel)) continue;
+      oldest_read_ = std::min(oldest_read_, p.event.utime);
       newest_read_ = std::max(newest_read_, p.event.utime);
+      if (options_.drop_channels.count(p.event.channel)) continue;
       p.order = next_order_++;
       pending_.push(std::move(p));
     }
@@ -247,6 +254,7 @@ class LcmLogReplay final : public LcmInterface {
   std::priority_queue<Pending, std::vector<Pending>, Later> pending_;
   std::map<std::string, int64_t> counts_;
   int64_t next_order_ = 0;
+  Utime oldest_read_ = INT64_MAX;
   Utime newest_read_ = INT64_MIN;
   bool finished_ = false;
   bool in_dispatch_ = false;

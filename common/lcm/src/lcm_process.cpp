@@ -144,14 +144,9 @@ LcmProcess::LcmProcess(Program* program, std::vector<ChannelSpec> inputs,
                       "use channel OTHER instead of NAME, as NAME=OTHER (e.g. LASER=FRONT_LASER)");
   cli.AddFlag("input-timeout-s", &input_timeout_s_,
               "live: warn (log and status) when a required input is silent this long [s]");
-  std::string status = "STATUS_";
-  for (char c : program->name()) {
-    status +=
-        std::isalnum(static_cast<unsigned char>(c)) ? static_cast<char>(std::toupper(c)) : '_';
-  }
   std::vector<ChannelSpec> out = outputs_;
-  out.push_back(
-      {status, "fusionloc.status_t", "health, about once a second (data time in log mode)"});
+  out.push_back({StatusChannel(program->name()), "fusionloc.status_t",
+                 "health, about once a second (data time in log mode)"});
   cli.AddEpilog("\n" + ChannelTable("Inputs", inputs_) + ChannelTable("Outputs", out));
   cli.AddCheck([this]() -> std::string {
     std::vector<std::string> known;

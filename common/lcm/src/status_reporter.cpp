@@ -7,12 +7,20 @@
 
 namespace fl {
 
-StatusReporter::StatusReporter(LcmInterface* lcm, std::string process, double period_s)
-    : lcm_(lcm), process_(std::move(process)), period_s_(period_s) {
-  channel_ = channels::kStatusPrefix;
-  for (char c : process_)
-    channel_ += std::isalnum(static_cast<unsigned char>(c)) ? std::toupper(c) : '_';
+std::string StatusChannel(const std::string& program) {
+  std::string channel = channels::kStatusPrefix;
+  for (char c : program) {
+    channel +=
+        std::isalnum(static_cast<unsigned char>(c)) ? static_cast<char>(std::toupper(c)) : '_';
+  }
+  return channel;
 }
+
+StatusReporter::StatusReporter(LcmInterface* lcm, std::string process, double period_s)
+    : lcm_(lcm),
+      process_(std::move(process)),
+      channel_(StatusChannel(process_)),
+      period_s_(period_s) {}
 
 void StatusReporter::CountDropped(const std::string& reason) {
   ++dropped_;

@@ -249,9 +249,11 @@ void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
   }
 }
 
-void RbpfSlamNode::Poll() {
+void RbpfSlamNode::Poll() { ProcessReady(false); }
+
+void RbpfSlamNode::ProcessReady(bool flush) {
   sync_.Process(
-      false,
+      flush,
       [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
         RunScan(scan, odom, lookup);
       },
@@ -312,12 +314,7 @@ void RbpfSlamNode::PublishGraph(Utime utime) {
 }
 
 void RbpfSlamNode::Finish() {
-  sync_.Process(
-      true,
-      [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
-        RunScan(scan, odom, lookup);
-      },
-      [this](const std::string& w) { warn_.Warn(w); });
+  ProcessReady(true);
   slam_.Finish();
   if (started_) {
     PublishGraph(last_utime_);

@@ -65,6 +65,9 @@ class LcmInterface {
   virtual std::map<std::string, int64_t> LogChannelCounts() const { return {}; }
   // Log mode: problems met reading the log ("" if none): corrupt bytes, truncation.
   virtual std::string LogProblems() const { return ""; }
+  // Log mode: the earliest and latest time stamps of the input events read so far; false
+  // live or before the first event.
+  virtual bool LogTimeSpan(Utime* /*first*/, Utime* /*last*/) const { return false; }
   // Log mode: fraction of the input read, in [0, 1]; -1 live.
   virtual double LogProgress() const { return -1.0; }
 

@@ -18,6 +18,9 @@
 
 namespace fl {
 
+// The status channel of a program: STATUS_ + its name upper-cased, '-' as '_'.
+std::string StatusChannel(const std::string& program);
+
 class StatusReporter {
  public:
   StatusReporter(LcmInterface* lcm, std::string process, double period_s = 1.0);

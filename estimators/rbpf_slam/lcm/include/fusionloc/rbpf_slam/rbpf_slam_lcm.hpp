@@ -103,6 +103,8 @@ class RbpfSlamNode : public LcmNode {
  private:
   void OnCalibration(const Pose2& T_base_laser);
   void OnLaser(const bot_core::planar_lidar_t& msg);
+  // Runs every scan the synchronisation hands on (with flush: every scan still waiting too).
+  void ProcessReady(bool flush);
   void RunScan(const LaserScan& scan, const Pose2* odom, const Status& lookup);
   void PublishGraph(Utime utime);
 
