@@ -107,9 +107,7 @@ class LcmProcess {
   LcmProcess(Program* program, std::vector<ChannelSpec> inputs, std::vector<ChannelSpec> outputs);
 
   const std::string& url() const { return url_; }
-  bool replaying() const { return url_.rfind("log:", 0) == 0; }
   const ChannelMap& channels() const { return channels_; }
-  double input_timeout_s() const { return input_timeout_s_; }
 
   // Opens LCM (throws UsageError for a malformed URL, std::runtime_error if it cannot be
   // opened) and installs the SIGINT/SIGTERM handlers.

@@ -59,8 +59,6 @@ class FusionNode : public LcmNode {
   void Finish() override;
   std::string Summary() const override;
 
-  const FactorGraphFusion& fusion() const { return fusion_; }
-
  private:
   void OnLaserPose(const bot_core::pose_t& m);
   void OnFactor(const fusionloc::relative_pose_factor_t& m, const std::string& channel);

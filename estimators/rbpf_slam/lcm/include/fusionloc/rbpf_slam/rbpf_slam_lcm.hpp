@@ -98,8 +98,6 @@ class RbpfSlamNode : public LcmNode {
   void Finish() override;
   std::string Summary() const override;
 
-  const RbpfSlam& slam() const { return slam_; }
-
  private:
   void OnCalibration(const Pose2& T_base_laser);
   void OnLaser(const bot_core::planar_lidar_t& msg);
