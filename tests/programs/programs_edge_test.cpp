@@ -86,6 +86,33 @@ TEST(ProgramsEdge, LcmProcessesShareOneExitCodePolicy) {
   }
 }
 
+// The device drivers publish and need no input; they share the exit codes for a bad options
+// file, a bad LCM URL, a bad channel rename, and a device that is not there (1).
+const char* kDrivers[] = {"fl-base-driver"};
+
+TEST(ProgramsEdge, DriversShareOneExitCodePolicy) {
+  TempDir dir;
+  {
+    std::ofstream bad(dir.file("bad.yaml"));
+    bad << "no_such_key: 1\n";
+  }
+  const std::string robot = fl::test::SourceDir() + "/config/robot/turtlebot2.yaml";
+  for (const char* p : kDrivers) {
+    const std::string bin = BinDir() + "/" + p + " --robot " + robot;
+    const auto cfg = RunCommand(bin + " --config bad.yaml", dir);
+    EXPECT_EQ(cfg.status, 2) << p << ": " << cfg.err;
+    EXPECT_NE(cfg.err.find("bad.yaml:1:1: unknown key 'no_such_key'"), std::string::npos)
+        << p << ": " << cfg.err;
+    const auto url = RunCommand(bin + " --lcm-url tcp://robot:7667", dir);
+    EXPECT_EQ(url.status, 2) << p << ": " << url.err;
+    const auto channel = RunCommand(bin + " --channel NOPE=X", dir);
+    EXPECT_EQ(channel.status, 2) << p << ": " << channel.err;
+    const auto missing = RunCommand(bin + " --lcm-url memq:// --port " + dir.file("nothing"), dir);
+    EXPECT_EQ(missing.status, 1) << p << ": " << missing.err;
+    EXPECT_NE(missing.err.find("nothing"), std::string::npos) << p << ": " << missing.err;
+  }
+}
+
 // A small simulator log (laser, odometry, stereo, calibration, ground truth).
 std::string SimLog(const TempDir& dir, double duration_s) {
   const std::string log = dir.file("sim.lcmlog");

@@ -7,6 +7,7 @@ namespace fl::channels {
 // ---- sensors (drivers, simulator, importers) ----
 constexpr const char* kLaser = "LASER";                           // bot_core.planar_lidar_t
 constexpr const char* kOdometry = "ODOMETRY";                     // fusionloc.wheel_odometry_t
+constexpr const char* kBaseCommand = "BASE_COMMAND";              // fusionloc.base_command_t
 constexpr const char* kStereo = "STEREO";                         // bot_core.images_t (LEFT, RIGHT)
 constexpr const char* kStereoCalibration = "STEREO_CALIBRATION";  // fusionloc.stereo_calibration_t
 // Reference pose of the base in the world frame (simulator truth, KITTI OXTS poses, CARMEN
