@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
   program.cli().AddFlag("duration", &duration_s, "[s] stop after this long (0: until Ctrl-C)");
   program.cli().AddEpilog(
       "\nPrints the device to stdout (\"/dev/pts/N\"), then runs until SIGINT/SIGTERM.\n"
-      "  fl-base-emulator --link /tmp/kobuki --checksum_error_rate 0.01\n");
+      "  fl-base-emulator --link /tmp/kobuki --config faults.yaml  # checksum_error_rate: 0.01\n");
   if (!program.Parse(argc, argv)) return program.exit_code();
   return program.Run([&] {
     if (!robot.empty()) {
