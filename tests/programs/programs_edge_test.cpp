@@ -86,30 +86,40 @@ TEST(ProgramsEdge, LcmProcessesShareOneExitCodePolicy) {
   }
 }
 
-// The device drivers publish and need no input; they share the exit codes for a bad options
-// file, a bad LCM URL, a bad channel rename, and a device that is not there (1).
-const char* kDrivers[] = {"fl-base-driver"};
+// The device drivers need no input; they share the exit codes for a bad options file, a bad
+// LCM URL or channel rename (2), and a device that is not there (1).
+struct Driver {
+  const char* name;
+  std::string args;     // what it needs besides the device
+  std::string missing;  // options naming a device that is not there
+};
 
 TEST(ProgramsEdge, DriversShareOneExitCodePolicy) {
   TempDir dir;
   {
     std::ofstream bad(dir.file("bad.yaml"));
     bad << "no_such_key: 1\n";
+    std::ofstream cal(dir.file("rig.yaml"));
+    cal << "width: 640\nheight: 480\nrectified: true\nleft: {fx: 500, fy: 500, cx: 320, cy: "
+           "240}\nright: {fx: 500, fy: 500, cx: 320, cy: 240}\ntranslation: [-0.1, 0, 0]\n";
   }
-  const std::string robot = fl::test::SourceDir() + "/config/robot/turtlebot2.yaml";
-  for (const char* p : kDrivers) {
-    const std::string bin = BinDir() + "/" + p + " --robot " + robot;
+  const std::vector<Driver> drivers{
+      {"fl-base-driver", "--robot " + fl::test::SourceDir() + "/config/robot/turtlebot2.yaml",
+       "--port " + dir.file("nothing")},
+      {"fl-stereo-driver", "--calibration rig.yaml", "--device " + dir.file("nothing")}};
+  for (const Driver& d : drivers) {
+    const std::string bin = BinDir() + "/" + d.name + " " + d.args;
     const auto cfg = RunCommand(bin + " --config bad.yaml", dir);
-    EXPECT_EQ(cfg.status, 2) << p << ": " << cfg.err;
+    EXPECT_EQ(cfg.status, 2) << d.name << ": " << cfg.err;
     EXPECT_NE(cfg.err.find("bad.yaml:1:1: unknown key 'no_such_key'"), std::string::npos)
-        << p << ": " << cfg.err;
+        << d.name << ": " << cfg.err;
     const auto url = RunCommand(bin + " --lcm-url tcp://robot:7667", dir);
-    EXPECT_EQ(url.status, 2) << p << ": " << url.err;
+    EXPECT_EQ(url.status, 2) << d.name << ": " << url.err;
     const auto channel = RunCommand(bin + " --channel NOPE=X", dir);
-    EXPECT_EQ(channel.status, 2) << p << ": " << channel.err;
-    const auto missing = RunCommand(bin + " --lcm-url memq:// --port " + dir.file("nothing"), dir);
-    EXPECT_EQ(missing.status, 1) << p << ": " << missing.err;
-    EXPECT_NE(missing.err.find("nothing"), std::string::npos) << p << ": " << missing.err;
+    EXPECT_EQ(channel.status, 2) << d.name << ": " << channel.err;
+    const auto missing = RunCommand(bin + " --lcm-url memq:// " + d.missing, dir);
+    EXPECT_EQ(missing.status, 1) << d.name << ": " << missing.err;
+    EXPECT_NE(missing.err.find("nothing"), std::string::npos) << d.name << ": " << missing.err;
   }
 }
 
