@@ -59,7 +59,8 @@ TEST(SimMainTest, WritesALogFromAConfigFile) {
   fl::LcmLogEvent ev;
   int events = 0, stereo = 0;
   while (reader.Next(&ev)) ++events, stereo += ev.channel == "STEREO";
-  EXPECT_EQ(events, 6 * 3 + 1 + 2);  // 6 steps x (truth, odometry, laser) + calib + 2 pairs
+  // 6 steps x (truth, odometry, laser) + calibration + 2 pairs + LASER_TO_BASE, CAMERA_TO_BASE
+  EXPECT_EQ(events, 6 * 3 + 1 + 2 + 2);
   EXPECT_EQ(stereo, 2);
 }
 

@@ -22,6 +22,7 @@
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/time.hpp"
 #include "fusionloc/sim/random.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/sim/sensors.hpp"
 #include "fusionloc/sim/sim_options.hpp"
 #include "fusionloc/sim/world.hpp"
@@ -38,7 +39,9 @@ struct SimFrame {
   double v = 0.0;      // [m/s] true forward speed
   double omega = 0.0;  // [rad/s] true yaw rate
   // Messages due at this step (publish in this order).
-  std::optional<fusionloc::stereo_calibration_t> calibration;
+  std::optional<bot_core::rigid_transform_t> laser_to_base;   // T_base_laser (laser enabled)
+  std::optional<bot_core::rigid_transform_t> camera_to_base;  // T_base_camera (camera enabled)
+  std::optional<fusionloc::stereo_calibration_t> calibration;  // (camera enabled)
   std::optional<bot_core::pose_t> ground_truth;
   std::optional<fusionloc::wheel_odometry_t> odometry;
   std::optional<bot_core::planar_lidar_t> laser;
@@ -77,6 +80,9 @@ class Simulator {
   const SimOptions& options() const { return options_; }
   int64_t total_frames() const { return options_.steps() + 1; }
   fusionloc::stereo_calibration_t Calibration(Utime utime) const;
+  // The mountings of the robot description, as published on LASER_TO_BASE / CAMERA_TO_BASE.
+  bot_core::rigid_transform_t LaserToBase(Utime utime) const;
+  bot_core::rigid_transform_t CameraToBase(Utime utime) const;
   const LaserModel& laser() const { return laser_; }
   const CameraModel& camera() const { return camera_; }
 
@@ -100,6 +106,8 @@ class Simulator {
 // channel names of fl::channels.
 template <class Fn>
 void VisitMessages(const SimFrame& f, Fn&& fn) {
+  if (f.laser_to_base) fn(channels::kLaserToBase, *f.laser_to_base);
+  if (f.camera_to_base) fn(channels::kCameraToBase, *f.camera_to_base);
   if (f.calibration) fn(channels::kStereoCalibration, *f.calibration);
   if (f.ground_truth) fn(channels::kGroundTruth, *f.ground_truth);
   if (f.odometry) fn(channels::kOdometry, *f.odometry);
