@@ -1,5 +1,6 @@
 // fl-sim: the simulated robot. Publishes LASER, ODOMETRY, STEREO, STEREO_CALIBRATION, the
-// mountings (LASER_TO_BASE, CAMERA_TO_BASE) and GROUND_TRUTH live over LCM, or writes them to an LCM log faster than real time.
+// mountings (LASER_TO_BASE, CAMERA_TO_BASE) and GROUND_TRUTH live over LCM, or writes them to an
+// LCM log faster than real time.
 #include <chrono>
 #include <cstdio>
 #include <exception>
@@ -68,12 +69,14 @@ int RunLive(const fl::sim::SimOptions& options, const fl::LcmProcess& process, d
   return 0;
 }
 
-int RunLog(const fl::sim::SimOptions& options, const std::string& path) {
+int RunLog(const fl::sim::SimOptions& options, const std::string& path,
+           const fl::ChannelMap& channels) {
   fl::InstallShutdownHandlers();
   const auto start = std::chrono::steady_clock::now();
   auto last = start;
-  const fl::sim::LogStats stats =
-      fl::sim::WriteLog(options, path, [&](int64_t done, int64_t total) {
+  const fl::sim::LogStats stats = fl::sim::WriteLog(
+      options, path,
+      [&](int64_t done, int64_t total) {
         // WriteLog deletes the partial output when this throws.
         if (fl::ShutdownRequested()) throw std::runtime_error("interrupted; no log written");
         const auto now = std::chrono::steady_clock::now();
@@ -84,7 +87,8 @@ int RunLog(const fl::sim::SimOptions& options, const std::string& path) {
         FL_LOG(INFO) << "step " << done << "/" << total << " ("
                      << (100 * done / std::max<int64_t>(total, 1)) << "%), eta "
                      << static_cast<int>(eta + 0.5) << " s";
-      });
+      },
+      channels);
   const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   FL_LOG(INFO) << "wrote " << path << ": " << stats.frames << " steps, " << stats.events
@@ -184,7 +188,7 @@ int main(int argc, char** argv) {
       FL_LOG(INFO) << "wrote " << snapshot << "_left.png and _right.png";
       return 0;
     }
-    if (!log_path.empty()) return RunLog(options, log_path);
+    if (!log_path.empty()) return RunLog(options, log_path, process.channels());
     return RunLive(options, process, rate);
   });
 }

@@ -268,7 +268,8 @@ bool Simulator::Step(SimFrame* out) {
 // Log writing
 
 LogStats WriteLog(const SimOptions& options, const std::string& path,
-                  const std::function<void(int64_t, int64_t)>& progress) {
+                  const std::function<void(int64_t, int64_t)>& progress,
+                  const ChannelMap& channels) {
   Simulator sim(options);  // validates before any file is created
   LcmLogWriter writer(path);
   LogStats stats;
@@ -276,7 +277,7 @@ LogStats WriteLog(const SimOptions& options, const std::string& path,
     SimFrame frame;
     while (sim.Step(&frame)) {
       VisitMessages(frame, [&](const char* channel, const auto& msg) {
-        writer.Write(channel, msg, frame.utime);
+        writer.Write(channels(channel), msg, frame.utime);
         ++stats.events;
         stats.bytes += msg.getEncodedSize();
       });

@@ -18,6 +18,7 @@
 #include "bot_core/images_t.hpp"
 #include "bot_core/planar_lidar_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "fusionloc/common/channel_map.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/time.hpp"
@@ -122,8 +123,10 @@ struct LogStats {
 };
 // Runs the whole simulation and writes an LCM log (atomically: nothing appears at `path` unless
 // it completes). `progress(done, total)` is called after each frame if given. Throws
-// std::invalid_argument for invalid options, std::runtime_error for I/O failures.
+// std::invalid_argument for invalid options, std::runtime_error for I/O failures. `channels`
+// renames the channels as fl-sim --channel does live.
 LogStats WriteLog(const SimOptions& options, const std::string& path,
-                  const std::function<void(int64_t, int64_t)>& progress = nullptr);
+                  const std::function<void(int64_t, int64_t)>& progress = nullptr,
+                  const ChannelMap& channels = ChannelMap());
 
 }  // namespace fl::sim
