@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
     if (robot.empty()) {
       throw fl::UsageError("give the robot description: --robot config/robot/turtlebot2.yaml");
     }
-    const fl::base::BaseGeometry geometry = fl::base::LoadBaseGeometry(robot);
+    const fl::BaseGeometry geometry = fl::base::LoadBaseGeometry(robot);
     if (!port.empty()) options.port = port;
     auto lcm = process.Open();
     BaseDriverNode node(options, geometry, lcm.get(), process.channels());

@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "fusionloc/base/kobuki_emulator.hpp"
+#include "fusionloc/base/odometry.hpp"
 #include "fusionloc/common/log.hpp"
 #include "fusionloc/common/program.hpp"
 #include "fusionloc/common/shutdown.hpp"
@@ -33,7 +34,7 @@ int main(int argc, char** argv) {
   if (!program.Parse(argc, argv)) return program.exit_code();
   return program.Run([&] {
     if (!robot.empty()) {
-      const fl::base::BaseGeometry g = fl::base::LoadBaseGeometry(robot);
+      const fl::BaseGeometry g = fl::base::LoadBaseGeometry(robot);
       options.wheel_radius_m = g.wheel_radius_m;
       options.track_m = g.track_m;
       options.ticks_per_revolution = g.ticks_per_revolution;

@@ -28,7 +28,7 @@ TEST(WheelOdometry, StraightForwardAcrossTheWrap) {
   EXPECT_FALSE(odo.Update(0, Reading(65500, 65000, 65000), &s));  // the reference
   // 1000 ticks forward on both wheels, across 65535 -> 0, robot clock wrapping too.
   ASSERT_TRUE(odo.Update(20000, Reading(65500 + 20 - 65536, 464, 464), &s));
-  const double d = 1000 * kKobuki.metres_per_tick();
+  const double d = 1000 * MetresPerTick(kKobuki);
   EXPECT_NEAR(s.x, d, 1e-12);
   EXPECT_NEAR(s.y, 0.0, 1e-12);
   EXPECT_NEAR(s.theta, 0.0, 1e-12);
@@ -42,7 +42,7 @@ TEST(WheelOdometry, StraightBackwardAcrossTheWrap) {
   OdometrySample s;
   odo.Update(0, Reading(100, 300, 300), &s);
   ASSERT_TRUE(odo.Update(20000, Reading(120, 65536 - 700, 65536 - 700), &s));  // -1000 ticks
-  EXPECT_NEAR(s.x, -1000 * kKobuki.metres_per_tick(), 1e-12);
+  EXPECT_NEAR(s.x, -1000 * MetresPerTick(kKobuki), 1e-12);
   EXPECT_LT(s.v, 0);
   EXPECT_EQ(s.left_ticks, -1000);
 }
@@ -56,7 +56,7 @@ TEST(WheelOdometry, RotationInPlaceGivesTheTrackAngle) {
                          Reading(20, static_cast<uint16_t>(10 - 500 + 65536),
                                  static_cast<uint16_t>(65530 + 500 - 65536)),
                          &s));
-  const double arc = 500 * kKobuki.metres_per_tick();
+  const double arc = 500 * MetresPerTick(kKobuki);
   EXPECT_NEAR(s.theta, 2 * arc / kKobuki.track_m, 1e-12);
   EXPECT_NEAR(s.x, 0.0, 1e-12);
   EXPECT_NEAR(s.y, 0.0, 1e-12);
@@ -68,7 +68,7 @@ TEST(WheelOdometry, OneArcStepIsExact) {
   WheelOdometry odo(kKobuki, {});
   OdometrySample s;
   odo.Update(0, Reading(0, 0, 0), &s);
-  const double m = kKobuki.metres_per_tick();
+  const double m = MetresPerTick(kKobuki);
   const int dl = 2000, dr = 3000;
   ASSERT_TRUE(odo.Update(20000, Reading(20, dl, dr), &s));
   const double th = (dr - dl) * m / kKobuki.track_m;
@@ -87,13 +87,15 @@ TEST(WheelOdometry, AGapResetsTheReference) {
   EXPECT_FALSE(odo.Update(1520000, Reading(1520, 40000, 40000), &s));
   EXPECT_EQ(odo.gaps(), 1);
   ASSERT_TRUE(odo.Update(1540000, Reading(1540, 40100, 40100), &s));
-  EXPECT_NEAR(s.x, 200 * kKobuki.metres_per_tick(), 1e-12);
+  EXPECT_NEAR(s.x, 200 * MetresPerTick(kKobuki), 1e-12);
 }
 
 TEST(WheelOdometry, InvalidGeometryIsRefused) {
   EXPECT_THROW(WheelOdometry(BaseGeometry{0.035, 0.23, 0.0}, {}), std::invalid_argument);
-  EXPECT_FALSE((BaseGeometry{0.0, 0.23, 2578.33}.Validate().ok()));
-  EXPECT_NE(BaseGeometry{}.Validate().message().find("turtlebot2.yaml"), std::string::npos);
+  EXPECT_FALSE(CheckOdometryGeometry(BaseGeometry{0.0, 0.23, 2578.33}).ok());
+  // Not described (all zero) is a valid robot description, but no odometry.
+  EXPECT_NE(CheckOdometryGeometry(BaseGeometry{}).message().find("turtlebot2.yaml"),
+            std::string::npos);
 }
 
 // Drives the emulated Kobuki (stepped, deterministic) on a commanded circle and integrates

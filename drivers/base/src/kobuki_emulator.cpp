@@ -3,11 +3,13 @@
 #include <chrono>
 #include <cmath>
 
+#include "fusionloc/base/odometry.hpp"
+
 namespace fl::base {
 
 fl::Status KobukiEmulatorOptions::Validate() const {
   BaseGeometry g{wheel_radius_m, track_m, ticks_per_revolution};
-  if (auto s = g.Validate(); !s.ok()) return s;
+  if (auto s = CheckOdometryGeometry(g); !s.ok()) return s;
   if (!(period_s > 0) || period_s > 1) return fl::Status::Error("period_s must be in (0, 1]");
   for (int v : {initial_left_encoder, initial_right_encoder, initial_timestamp_ms}) {
     if (v < 0 || v > 65535) {

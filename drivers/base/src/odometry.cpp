@@ -5,11 +5,15 @@
 
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/number_format.hpp"
+#include "fusionloc/common/robot_description.hpp"
 #include "fusionloc/common/yaml_options.hpp"
 
 namespace fl::base {
 
-fl::Status BaseGeometry::Validate() const {
+fl::Status CheckOdometryGeometry(const fl::BaseGeometry& g) {
+  if (auto s = g.Validate(); !s.ok()) return s;
+  const double wheel_radius_m = g.wheel_radius_m, track_m = g.track_m,
+               ticks_per_revolution = g.ticks_per_revolution;
   if (!(wheel_radius_m > 0) || !(track_m > 0) || !(ticks_per_revolution > 0)) {
     return fl::Status::Error(
         "base geometry needs wheel_radius_m, track_m and ticks_per_revolution > 0 (got " +
@@ -20,19 +24,21 @@ fl::Status BaseGeometry::Validate() const {
   return fl::Status::Ok();
 }
 
-double BaseGeometry::metres_per_tick() const {
-  return 2.0 * M_PI * wheel_radius_m / ticks_per_revolution;
+double MetresPerTick(const fl::BaseGeometry& g) {
+  return 2.0 * M_PI * g.wheel_radius_m / g.ticks_per_revolution;
 }
 
-BaseGeometry LoadBaseGeometry(const std::string& robot_path) {
-  BaseGeometry g = LoadYamlFile<BaseGeometry>(robot_path, "base");
-  if (auto s = g.Validate(); !s.ok()) throw ConfigError(robot_path + ": " + s.message());
+fl::BaseGeometry LoadBaseGeometry(const std::string& robot_path) {
+  const fl::BaseGeometry g = LoadRobotDescription(robot_path).base;
+  if (auto s = CheckOdometryGeometry(g); !s.ok()) {
+    throw ConfigError(robot_path + ": base: " + s.message());
+  }
   return g;
 }
 
 WheelOdometry::WheelOdometry(const BaseGeometry& geometry, const Options& options)
     : geometry_(geometry), options_(options) {
-  if (auto s = geometry_.Validate(); !s.ok()) throw std::invalid_argument(s.message());
+  if (auto s = CheckOdometryGeometry(geometry_); !s.ok()) throw std::invalid_argument(s.message());
 }
 
 bool WheelOdometry::Update(Utime utime, const kobuki::BasicSensorData& r, OdometrySample* out) {
@@ -51,7 +57,7 @@ bool WheelOdometry::Update(Utime utime, const kobuki::BasicSensorData& r, Odomet
   const int32_t dl_ticks = kobuki::WrapDelta16(previous_.left_encoder, r.left_encoder);
   const int32_t dr_ticks = kobuki::WrapDelta16(previous_.right_encoder, r.right_encoder);
   const int32_t dt_ms = kobuki::WrapDelta16(previous_.timestamp_ms, r.timestamp_ms);
-  const double m_per_tick = geometry_.metres_per_tick();
+  const double m_per_tick = MetresPerTick(geometry_);
   const double dl = dl_ticks * m_per_tick, dr = dr_ticks * m_per_tick;
   const double ds = 0.5 * (dl + dr);
   const double dth = (dr - dl) / geometry_.track_m;

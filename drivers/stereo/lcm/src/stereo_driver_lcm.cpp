@@ -53,10 +53,6 @@ fusionloc::stereo_calibration_t CalibrationToLcm(const RectifiedCamera& c, Utime
   m.cy = c.cy;
   m.baseline = c.baseline;
   m.rectified = true;  // what the driver publishes is rectified
-  // The mounting is not this driver's: it comes from the robot description
-  // (CAMERA_TO_BASE). Identity here keeps the fields well-formed until they leave the message.
-  m.T_base_camera.quat[0] = 1.0;
-  m.T_base_laser.quat[0] = 1.0;
   return m;
 }
 

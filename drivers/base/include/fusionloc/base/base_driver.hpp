@@ -7,9 +7,9 @@
 #include <string>
 #include <vector>
 
-#include "fusionloc/base/base_geometry.hpp"
 #include "fusionloc/base/kobuki_protocol.hpp"
 #include "fusionloc/base/odometry.hpp"
+#include "fusionloc/common/robot_description.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/serial/serial_port.hpp"
 

@@ -13,9 +13,9 @@
 #include <thread>
 #include <vector>
 
-#include "fusionloc/base/base_geometry.hpp"
 #include "fusionloc/base/kobuki_protocol.hpp"
 #include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/robot_description.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/serial/pty.hpp"
 

@@ -4,11 +4,20 @@
 
 #include <cstdint>
 
-#include "fusionloc/base/base_geometry.hpp"
 #include "fusionloc/base/kobuki_protocol.hpp"
+#include "fusionloc/common/robot_description.hpp"
 #include "fusionloc/common/time.hpp"
 
 namespace fl::base {
+
+// The base geometry odometry needs (fl::BaseGeometry from the robot description): all three
+// positive, else the error naming the robot file's keys and the Kobuki's values.
+fl::Status CheckOdometryGeometry(const fl::BaseGeometry& g);
+// [m] wheel travel per encoder tick.
+double MetresPerTick(const fl::BaseGeometry& g);
+// The `base:` of a robot description (config/robot/<robot>.yaml), which must be described.
+// Throws fl::ConfigError naming the file and the fix.
+fl::BaseGeometry LoadBaseGeometry(const std::string& robot_path);
 
 // One odometry sample (the fields of fusionloc.wheel_odometry_t). Odometry frame: the base
 // frame at the first reading (x forward, y left), heading counter-clockwise in (-pi, pi].
@@ -36,7 +45,7 @@ class WheelOdometry {
     // the motion in the gap is lost, and it is counted in gaps().
     double max_gap_s = 1.0;
   };
-  // `geometry` must be valid (BaseGeometry::Validate).
+  // `geometry` must pass CheckOdometryGeometry (std::invalid_argument otherwise).
   WheelOdometry(const BaseGeometry& geometry, const Options& options);
 
   // Adds a reading taken at host time `utime`. Returns false for the first reading (and the
