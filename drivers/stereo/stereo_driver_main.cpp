@@ -13,7 +13,7 @@ int main(int argc, char** argv) {
                       "calibration file's maps; publishes the pair and the calibration.");
   fl::stereo::StereoDriverOptions options;
   program.AddOptions(&options, "config/stereo_driver.yaml");
-  std::string folder, device, calibration, log;
+  std::string folder, device, calibration, log, capture;
   double rate_hz = 0.0;
   program.cli().AddFlag("folder", &folder, "play the image pairs of this folder (no camera)");
   program.cli().AddFlag("rate", &rate_hz, "[Hz] folder playback rate, overrides folder.rate_hz");
@@ -23,10 +23,14 @@ int main(int argc, char** argv) {
   program.cli().AddFlag("log", &log,
                         "folder: write the messages to this LCM log at full speed instead of "
                         "publishing them");
+  program.cli().AddFlag("capture", &capture,
+                        "camera: save a raw pair every capture_period_s in this folder "
+                        "(left/, right/) for fl-stereo-calibrate; overrides capture_folder");
   fl::LcmProcess process(&program, {}, StereoDriverNode::Outputs());
   program.cli().AddEpilog(
       "\nExamples:\n"
       "  fl-stereo-driver --calibration rig.yaml                       # /dev/video0\n"
+      "  fl-stereo-driver --capture pairs/      # chessboard pairs for fl-stereo-calibrate\n"
       "  fl-stereo-driver --folder ../shared/data/stereo/kitti_raw_2011_09_26_drive_0001\n"
       "  fl-stereo-driver --folder pairs/ --calibration rig.yaml --rate 5 --log pairs.lcmlog\n"
       "Folder time stamps: the start time plus frame / rate. Calibrate: fl-stereo-calibrate; "
@@ -36,6 +40,7 @@ int main(int argc, char** argv) {
     if (!device.empty()) options.camera.device = device;
     if (!calibration.empty()) options.calibration = calibration;
     if (rate_hz != 0.0) options.folder.rate_hz = rate_hz;
+    if (!capture.empty()) options.capture_folder = capture;
     if (auto s = options.Validate(); !s.ok()) throw fl::UsageError(s.message());
     if (!log.empty()) {
       if (folder.empty()) throw fl::UsageError("--log needs --folder");

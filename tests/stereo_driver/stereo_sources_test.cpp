@@ -216,7 +216,8 @@ TEST(SideBySideCamera, NodePublishesRectifiedPairsAndCalibration) {
   lcm->Subscribe<fusionloc::stereo_calibration_t>(
       "STEREO_CALIBRATION",
       [&](const fusionloc::stereo_calibration_t& m, const std::string&) { calibs.push_back(m); });
-  StereoDriverNode node(o, std::move(g), SmallRectified(), lcm.get(), fl::ChannelMap());
+  const RigCalibration calib = SmallRectified();
+  StereoDriverNode node(o, std::move(g), &calib, lcm.get(), fl::ChannelMap());
   for (int i = 0; i < 8; ++i) node.Step();
   ASSERT_EQ(pairs.size(), 5u);
   ASSERT_GE(calibs.size(), 1u);
@@ -231,6 +232,26 @@ TEST(SideBySideCamera, NodePublishesRectifiedPairsAndCalibration) {
   EXPECT_EQ(p.images[0].utime, p.utime);
   EXPECT_EQ(p.images[1].data[0], 200);
   EXPECT_EQ(p.images[0].data[0], 10);
+}
+
+TEST(SideBySideCamera, CapturesRawPairsForTheCalibration) {
+  TempDir dir;
+  auto g = std::make_unique<ScriptedGrabber>();
+  for (int i = 0; i < 4; ++i) g->reads.push_back('f');
+  StereoDriverOptions o;
+  o.camera.width = 16;
+  o.camera.height = 6;
+  o.capture_folder = dir.file("pairs");
+  o.capture_period_s = 0.0;
+  auto lcm = fl::MakeLcm("memq://");
+  StereoDriverNode node(o, std::move(g), nullptr, lcm.get(), fl::ChannelMap());  // no calib
+  for (int i = 0; i < 6; ++i) node.Step();
+  EXPECT_EQ(node.captured(), 4);
+  EXPECT_EQ(node.published(), 0);                                     // capturing only
+  const ImagePairs pairs = ListImagePairs(dir.file("pairs"), false);  // as the calibration reads
+  ASSERT_EQ(pairs.left.size(), 4u);
+  EXPECT_EQ(cv::imread(pairs.left[0], cv::IMREAD_GRAYSCALE).at<uint8_t>(0, 0), 10);
+  EXPECT_EQ(cv::imread(pairs.right[0], cv::IMREAD_GRAYSCALE).at<uint8_t>(0, 0), 200);
 }
 
 TEST(CheckVideoDevice, NamesTheProblem) {

@@ -16,6 +16,7 @@ namespace fl::stereo {
 
 fl::Status StereoDriverOptions::Validate() const {
   if (!(calibration_period_s >= 0)) return fl::Status::Error("calibration_period_s must be >= 0");
+  if (!(capture_period_s >= 0)) return fl::Status::Error("capture_period_s must be >= 0");
   if (auto s = folder.Validate(); !s.ok()) return s;
   return camera.Validate();
 }
@@ -112,18 +113,26 @@ StereoDriverNode::StereoDriverNode(const StereoDriverOptions& options, const std
                          : ", " + std::to_string(folder_->pairs().unpaired.size()) +
                                " unpaired image(s) skipped");
   } else {
-    if (options.calibration.empty()) {
-      throw UsageError("a camera needs its calibration: --calibration FILE (fl-stereo-calibrate)");
+    if (options.calibration.empty() && options.capture_folder.empty()) {
+      throw UsageError(
+          "a camera needs its calibration: --calibration FILE (fl-stereo-calibrate; to take "
+          "its chessboard pairs first: --capture DIR)");
     }
-    const RigCalibration calib = LoadRigCalibration(options.calibration);
-    if (calib.width * 2 != options.camera.width || calib.height != options.camera.height) {
-      throw ConfigError("calibration " + options.calibration + " is for " +
-                        std::to_string(calib.width) + "x" + std::to_string(calib.height) +
-                        " views but camera.width x height is " +
-                        std::to_string(options.camera.width) + "x" +
-                        std::to_string(options.camera.height) + " (two views side by side)");
+    if (!options.calibration.empty()) {
+      const RigCalibration calib = LoadRigCalibration(options.calibration);
+      if (calib.width * 2 != options.camera.width || calib.height != options.camera.height) {
+        throw ConfigError("calibration " + options.calibration + " is for " +
+                          std::to_string(calib.width) + "x" + std::to_string(calib.height) +
+                          " views but camera.width x height is " +
+                          std::to_string(options.camera.width) + "x" +
+                          std::to_string(options.camera.height) + " (two views side by side)");
+      }
+      rectifier_ = std::make_unique<Rectifier>(calib);
     }
-    rectifier_ = std::make_unique<Rectifier>(calib);
+    if (!options.capture_folder.empty()) {
+      std::filesystem::create_directories(options.capture_folder + "/left");
+      std::filesystem::create_directories(options.capture_folder + "/right");
+    }
     camera_ = std::make_unique<SideBySideCamera>(MakeV4l2Grabber(options.camera), options.camera);
   }
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "starting");
@@ -132,21 +141,42 @@ StereoDriverNode::StereoDriverNode(const StereoDriverOptions& options, const std
 
 StereoDriverNode::StereoDriverNode(const StereoDriverOptions& options,
                                    std::unique_ptr<FrameGrabber> grabber,
-                                   const RigCalibration& calibration, LcmInterface* lcm,
+                                   const RigCalibration* calibration, LcmInterface* lcm,
                                    const ChannelMap& channels)
     : options_(options),
       lcm_(lcm),
       ch_stereo_(channels(channels::kStereo)),
       ch_calibration_(channels(channels::kStereoCalibration)),
       status_(lcm, kProgram) {
-  rectifier_ = std::make_unique<Rectifier>(calibration);
+  if (calibration) rectifier_ = std::make_unique<Rectifier>(*calibration);
+  if (!options.capture_folder.empty()) {
+    std::filesystem::create_directories(options.capture_folder + "/left");
+    std::filesystem::create_directories(options.capture_folder + "/right");
+  }
   camera_ = std::make_unique<SideBySideCamera>(std::move(grabber), options.camera);
   start_monotonic_ = MonotonicUtime();
 }
 
 StereoDriverNode::~StereoDriverNode() = default;
 
+void StereoDriverNode::Capture(const StereoFrame& f) {
+  const Utime now = MonotonicUtime();
+  if (captured_ > 0 && now - last_capture_ < SecondsToUtime(options_.capture_period_s)) return;
+  char name[32];
+  std::snprintf(name, sizeof name, "%06lld.png", static_cast<long long>(captured_));
+  const std::string& dir = options_.capture_folder;
+  if (!cv::imwrite(dir + "/left/" + name, f.left) ||
+      !cv::imwrite(dir + "/right/" + name, f.right)) {
+    throw std::runtime_error("cannot write the captured pair " + std::string(name) + " in " + dir);
+  }
+  last_capture_ = now;
+  ++captured_;
+  FL_LOG(INFO) << "captured " << dir << "/{left,right}/" << name;
+}
+
 void StereoDriverNode::Publish(StereoFrame* f) {
+  if (!options_.capture_folder.empty()) Capture(*f);
+  if (!rectifier_) return;  // capturing only
   if (!calibration_sent_ ||
       (options_.calibration_period_s > 0 &&
        f->utime - last_calibration_ >= SecondsToUtime(options_.calibration_period_s))) {
@@ -195,6 +225,7 @@ bool StereoDriverNode::Step() {
 
 void StereoDriverNode::UpdateStatus() {
   status_.Set("published", static_cast<double>(published_));
+  if (!options_.capture_folder.empty()) status_.Set("captured", static_cast<double>(captured_));
   if (folder_) {
     status_.Set("unreadable", static_cast<double>(folder_->unreadable()));
     status_.Set("unpaired_skipped", static_cast<double>(folder_->pairs().unpaired.size()));

@@ -24,6 +24,10 @@ struct StereoDriverOptions {
   double calibration_period_s = 1.0;  // [s] STEREO_CALIBRATION repeat period (data time)
   bool gray = true;                   // publish 8-bit GRAY (false: BGR for a color source)
   bool realtime = true;               // folder: play at rate_hz in wall time (false: at once)
+  // Camera: also save raw (unrectified) pairs here as left/NNNNNN.png + right/NNNNNN.png, for
+  // fl-stereo-calibrate; without a calibration the driver then only captures. "" = off.
+  std::string capture_folder;
+  double capture_period_s = 1.0;  // [s] at most one captured pair per period
   FolderSourceOptions folder;
   CameraSourceOptions camera;
 
@@ -33,6 +37,8 @@ struct StereoDriverOptions {
     a->Visit("calibration_period_s", &calibration_period_s);
     a->Visit("gray", &gray);
     a->Visit("realtime", &realtime);
+    a->Visit("capture_folder", &capture_folder);
+    a->Visit("capture_period_s", &capture_period_s);
     a->Visit("folder", &folder);
     a->Visit("camera", &camera);
   }
@@ -56,9 +62,9 @@ class StereoDriverNode {
   // pairs, a device that is not a camera, a calibration that does not match the images.
   StereoDriverNode(const StereoDriverOptions& options, const std::string& folder, LcmInterface* lcm,
                    const ChannelMap& channels);
-  // A camera from another grabber (tests).
+  // A camera from another grabber (tests); `calibration` nullptr: capture only.
   StereoDriverNode(const StereoDriverOptions& options, std::unique_ptr<FrameGrabber> grabber,
-                   const RigCalibration& calibration, LcmInterface* lcm,
+                   const RigCalibration* calibration, LcmInterface* lcm,
                    const ChannelMap& channels);
   ~StereoDriverNode();
 
@@ -69,12 +75,14 @@ class StereoDriverNode {
 
   StatusReporter& status() { return status_; }
   int64_t published() const { return published_; }
-  const Rectifier& rectifier() const { return *rectifier_; }
+  const Rectifier* rectifier() const { return rectifier_.get(); }
+  int64_t captured() const { return captured_; }
   const FolderSource* folder_source() const { return folder_.get(); }
   const SideBySideCamera* camera_source() const { return camera_.get(); }
 
  private:
   void Publish(StereoFrame* frame);
+  void Capture(const StereoFrame& frame);
   void UpdateStatus();
 
   StereoDriverOptions options_;
@@ -88,6 +96,8 @@ class StereoDriverNode {
   bool calibration_sent_ = false;
   int64_t published_ = 0;
   Utime start_monotonic_ = 0;
+  Utime last_capture_ = 0;
+  int64_t captured_ = 0;
 };
 
 }  // namespace fl::stereo
