@@ -142,6 +142,41 @@ TEST(WheelOdometry, FollowsAnEmulatedCircle) {
   EXPECT_NEAR(s.theta, truth.theta, 1e-3);
 }
 
+// Feedback dropouts (0.3 s every second) lose packets, not motion: the encoders are cumulative,
+// so the first packet after a dropout carries the whole step.
+TEST(WheelOdometry, DropoutsLosePacketsNotMotion) {
+  KobukiEmulatorOptions eo;
+  eo.dropout_every_s = 1.0;
+  eo.dropout_length_s = 0.3;
+  SimulatedKobuki kobuki(eo);
+  const auto cmd = kobuki::EncodePacket(
+      kobuki::EncodeBaseControl(kobuki::VelocityToBaseControl(0.3, -0.5, kKobuki.track_m)));
+  kobuki.Receive(cmd.data(), cmd.size());
+  WheelOdometry odo(kKobuki, {});
+  kobuki::PacketParser parser;
+  OdometrySample s;
+  int packets = 0;
+  Pose2 first, at_last_packet;
+  for (int k = 1; k <= 190; ++k) {  // 3.8 s
+    const auto bytes = kobuki.Step(0.02);
+    std::vector<std::vector<uint8_t>> payloads;
+    parser.Feed(bytes.data(), bytes.size(), &payloads);
+    for (const auto& p : payloads) {
+      const auto d = kobuki::DecodeBasicSensorData((*kobuki::SplitPayload(p))[0].data);
+      if (packets++ == 0) first = kobuki.pose();
+      at_last_packet = kobuki.pose();
+      odo.Update(SecondsToUtime(0.02 * k), *d, &s);
+    }
+  }
+  EXPECT_GE(kobuki.dropped(), 44);  // 3 dropouts of 15 packets (give or take the boundaries)
+  EXPECT_EQ(packets, 190 - kobuki.dropped());
+  const Pose2 truth = first.inverse() * at_last_packet;
+  EXPECT_NEAR(s.x, truth.x, 2e-4);
+  EXPECT_NEAR(s.y, truth.y, 2e-4);
+  EXPECT_NEAR(s.theta, truth.theta, 1e-3);
+  EXPECT_EQ(odo.gaps(), 0);  // 0.3 s is below max_gap_s
+}
+
 TEST(CommandWatchdog, StopsAfterTheTimeoutAndCountsOnce) {
   CommandWatchdog wd(0.5);
   EXPECT_EQ(wd.Current(0).v, 0.0);
