@@ -14,6 +14,7 @@
 
 #include "fusionloc/base/base_driver_lcm.hpp"
 #include "fusionloc/base/kobuki_emulator.hpp"
+#include "fusionloc/serial/pty.hpp"
 #include "fusionloc/serial/serial_port.hpp"
 #include "test_paths.hpp"
 
@@ -152,6 +153,25 @@ TEST(BaseDriver, NodePublishesOdometryAndTakesCommandsOverLcm) {
   EXPECT_GT(odometry.back().utime, odometry.front().utime);
   EXPECT_NEAR(odometry.back().x, emulator.pose().x, 2e-3);
   EXPECT_EQ(node.published(), static_cast<int64_t>(odometry.size()));
+}
+
+TEST(BaseDriver, AnotherDeviceOnThePortIsNamed) {
+  fl::serial::Pty pty;  // speaks SCIP text (a Hokuyo), not the Kobuki protocol
+  BaseDriverOptions o;
+  o.port = pty.slave_path();
+  auto lcm = fl::MakeLcm("memq://");
+  BaseDriverNode node(o, kKobuki, lcm.get(), ChannelMap());
+  const std::string scip = "VV\n00P\nVEND:Hokuyo Automatic Co.,Ltd.;[\nPROD:URG-04LX;[\n\n";
+  const Utime end = MonotonicUtime() + 500000;
+  while (MonotonicUtime() < end) {
+    pty.Write(reinterpret_cast<const uint8_t*>(scip.data()), scip.size());
+    node.Step(5);
+  }
+  EXPECT_EQ(node.driver().stats().packets, 0);
+  EXPECT_TRUE(node.driver().stats().not_a_kobuki);
+  EXPECT_NE(node.status().message().find("none is a Kobuki packet"), std::string::npos)
+      << node.status().message();
+  EXPECT_EQ(node.published(), 0);
 }
 
 TEST(SerialPort, ClearErrorsForBadPorts) {

@@ -101,6 +101,8 @@ void BaseDriver::Spin(int timeout_ms, std::vector<OdometrySample>* out) {
   stats_.watchdog_stops = watchdog_.timeouts();
   stats_.odometry_gaps = odometry_.gaps();
   stats_.feedback_stale = now - last_feedback_ > SecondsToUtime(options_.feedback_timeout_s);
+  stats_.not_a_kobuki = stats_.packets == 0 &&
+                        parser_.skipped_bytes() + static_cast<int64_t>(parser_.buffered()) >= 256;
 }
 
 void BaseDriver::HandlePayload(const std::vector<uint8_t>& payload,

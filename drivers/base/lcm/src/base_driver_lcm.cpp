@@ -86,6 +86,13 @@ void BaseDriverNode::UpdateStatus() {
   status_.Set("odometry_gaps", static_cast<double>(st.odometry_gaps));
   if (!st.connected) {
     status_.SetState(fusionloc::status_t::LEVEL_ERROR, driver_.problem());
+  } else if (st.not_a_kobuki) {
+    const std::string m = "bytes arrive on " + driver_.options().port +
+                          " but none is a Kobuki packet: another device on this port (check "
+                          "`ls -l /dev/serial/by-id/`) or a wrong baud rate (the Kobuki's is "
+                          "115200)";
+    if (status_.message() != m) FL_LOG(ERROR) << m;
+    status_.SetState(fusionloc::status_t::LEVEL_ERROR, m);
   } else if (st.feedback_stale) {
     status_.SetState(fusionloc::status_t::LEVEL_WARN,
                      "no feedback from " + driver_.options().port +

@@ -53,6 +53,9 @@ struct BaseDriverStats {
   int64_t odometry_gaps = 0;   // odometry reference resets after a silence
   bool connected = false;
   bool feedback_stale = false;  // no feedback for feedback_timeout_s
+  // Bytes arrive but not one good Kobuki packet among the first 256: another device on this
+  // port (or a wrong baud rate).
+  bool not_a_kobuki = false;
 };
 
 class BaseDriver {
