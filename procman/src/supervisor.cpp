@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "fusionloc/common/shutdown.hpp"
+#include "fusionloc/procman/process.hpp"
 
 namespace fl::procman {
 
@@ -85,51 +86,15 @@ bool Supervisor::Active(size_t i) const {
 bool Supervisor::Start(size_t i) {
   Proc& p = procs_[i];
   ProcessStatus& st = status_[i];
-  int report[2];
-  if (pipe2(report, O_CLOEXEC) != 0) {
-    st.error = std::string("pipe: ") + std::strerror(errno);
+  SpawnOptions spawn;
+  spawn.capture_output = false;
+  spawn.output_path = st.log_path;
+  const SpawnResult r = SpawnProcess(p.argv, spawn);
+  if (r.pid < 0) {
+    st.error = r.error;
     return false;
   }
-  std::vector<char*> argv;
-  for (std::string& a : p.argv) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  const pid_t pid = fork();
-  if (pid < 0) {
-    st.error = std::string("fork: ") + std::strerror(errno);
-    close(report[0]);
-    close(report[1]);
-    return false;
-  }
-  if (pid == 0) {
-    // Child: own process group, /dev/null in, log file out. Only async-signal-safe calls.
-    setpgid(0, 0);
-    signal(SIGINT, SIG_DFL);
-    signal(SIGTERM, SIG_DFL);
-    const int in = open("/dev/null", O_RDONLY);
-    const int out = open(st.log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    if (in >= 0) dup2(in, 0);
-    if (out >= 0) {
-      dup2(out, 1);
-      dup2(out, 2);
-    }
-    execvp(argv[0], argv.data());
-    const int err = errno;
-    (void)!write(report[1], &err, sizeof(err));
-    _exit(127);
-  }
-  setpgid(pid, pid);  // also from the parent: no race with an early kill
-  close(report[1]);
-  int child_errno = 0;
-  ssize_t n;
-  do {
-    n = read(report[0], &child_errno, sizeof(child_errno));
-  } while (n < 0 && errno == EINTR);
-  close(report[0]);
-  if (n == sizeof(child_errno)) {
-    waitpid(pid, nullptr, 0);
-    st.error = "cannot run '" + p.argv[0] + "': " + std::strerror(child_errno);
-    return false;
-  }
+  const pid_t pid = r.pid;
   st.pid = pid;
   st.state = ProcessState::kRunning;
   st.error.clear();
