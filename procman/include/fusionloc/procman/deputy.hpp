@@ -117,6 +117,7 @@ class Deputy {
   Deputy& operator=(const Deputy&) = delete;
 
   const std::string& name() const { return options_.name; }
+  void set_output(OutputFn output) { output_ = std::move(output); }
 
   // Applies orders (see the file comment). now_us: wall clock [us since the epoch].
   OrdersVerdict HandleOrders(const Orders& orders, int64_t now_us);
