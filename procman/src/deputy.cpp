@@ -176,6 +176,7 @@ void Deputy::Start(Command* c, int32_t runid) {
   if (options_.orphan_guard) guard_.Watch(r.pid);
   st.pid = r.pid;
   st.state = CommandState::kRunning;
+  ++changes_;
   ++st.starts;
   c->output_fd = r.output_fd;
   c->started_at_s = Now();
@@ -191,6 +192,7 @@ void Deputy::BeginStop(Command* c) {
   if (st.pid <= 0) return;
   kill(-st.pid, st.spec.stop_signal);
   st.state = CommandState::kStopping;
+  ++changes_;
   c->stop_deadline_s = Now() + st.spec.stop_time_allowed_s;
 }
 
@@ -225,6 +227,7 @@ void Deputy::OnExit(Command* c, int ws) {
   const int64_t peak = ReadPeakRss(st.pid);  // 0: already gone
   st.peak_rss_bytes = std::max(st.peak_rss_bytes, peak);
   st.pid = 0;
+  ++changes_;
   st.exit_status = ws;
   st.exited = true;
   st.rss_bytes = 0;

@@ -339,7 +339,7 @@ std::string Sheriff::StatusTable() const {
   std::ostringstream o;
   o << std::left << std::setw(10) << "host" << std::setw(24) << "command" << std::setw(11)
     << "state" << std::right << std::setw(8) << "pid" << std::setw(5) << "run" << std::setw(7)
-    << "starts" << std::setw(9) << "respawns" << std::setw(6) << "exit" << std::setw(7) << "cpu%"
+    << "starts" << std::setw(9) << "respawns" << std::setw(8) << "exit" << std::setw(7) << "cpu%"
     << std::setw(9) << "rss_MB"
     << "\n";
   for (size_t i = 0; i < cmds_.size(); ++i) {
@@ -350,7 +350,7 @@ std::string Sheriff::StatusTable() const {
     o << std::left << std::setw(10) << c.host << std::setw(24) << c.path() << std::setw(11)
       << ToString(State(i)) << std::right << std::setw(8)
       << (r.pid > 0 ? std::to_string(r.pid) : "-") << std::setw(5) << r.actual_runid << std::setw(7)
-      << r.starts << std::setw(9) << r.respawns << std::setw(6) << ExitText(r) << std::setw(7)
+      << r.starts << std::setw(9) << r.respawns << std::setw(8) << ExitText(r) << std::setw(7)
       << cpu << std::setw(9) << Mb(r.rss_bytes);
     if (!r.error.empty()) o << "  (" << r.error << ")";
     o << "\n";

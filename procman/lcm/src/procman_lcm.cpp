@@ -190,22 +190,24 @@ DeputyNode::DeputyNode(Deputy* deputy, LcmInterface* lcm, const ChannelMap& chan
       options_(options),
       status_(lcm, options.program) {
   deputy_->set_output([this](int32_t id, const std::string& text) { Printf(id, text); });
-  lcm_->Subscribe<bot_procman::orders2_t>(
-      channels(channels::kPmdOrders),
-      [this](const bot_procman::orders2_t& msg, const std::string&) {
-        if (!options_.accept_unsigned) {
-          if (msg.host == deputy_->name()) {
-            Refuse("unsigned",
-                   "unsigned orders from sheriff '" + msg.sheriff_name +
-                       "' on PMD_ORDERS2 (this deputy acts on signed orders only; start it with "
-                       "--insecure to accept them)");
-          } else {
-            ++refused_.other_host;
+  if (options_.subscribe_orders) {
+    lcm_->Subscribe<bot_procman::orders2_t>(
+        channels(channels::kPmdOrders),
+        [this](const bot_procman::orders2_t& msg, const std::string&) {
+          if (!options_.accept_unsigned) {
+            if (msg.host == deputy_->name()) {
+              Refuse("unsigned",
+                     "unsigned orders from sheriff '" + msg.sheriff_name +
+                         "' on PMD_ORDERS2 (this deputy acts on signed orders only; start it with "
+                         "--insecure to accept them)");
+            } else {
+              ++refused_.other_host;
+            }
+            return;
           }
-          return;
-        }
-        HandleOrders(FromLcm(msg), "PMD_ORDERS2");
-      });
+          HandleOrders(FromLcm(msg), "PMD_ORDERS2");
+        });
+  }
   // Someone new (a sheriff starting): tell it what runs here now, not in a second.
   lcm_->Subscribe<bot_procman::discovery_t>(
       discover_channel_, [this](const bot_procman::discovery_t& msg, const std::string&) {
@@ -278,7 +280,11 @@ void DeputyNode::PublishStatus() {
 void DeputyNode::Poll() {
   deputy_->Poll();
   const int64_t now = WallClockUs();
-  if (now >= next_status_us_) {
+  // At the period, and soon after a start or an exit (at most 20 a second).
+  const bool changed = deputy_->changes() != published_changes_ && now - last_status_us_ >= 50000;
+  if (now >= next_status_us_ || changed) {
+    published_changes_ = deputy_->changes();
+    last_status_us_ = now;
     next_status_us_ = now + static_cast<int64_t>(options_.status_period_s * 1e6);
     PublishStatus();
   }

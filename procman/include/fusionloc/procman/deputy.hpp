@@ -129,6 +129,8 @@ class Deputy {
   std::vector<CommandStatus> Commands() const;
   // Stops everything and waits (up to each command's stop_time_allowed, then SIGKILL).
   void StopAll();
+  // Counts starts, exits and stops begun: a status is worth sending when it changes.
+  uint64_t changes() const { return changes_; }
   // True while some command is running or stopping.
   bool AnyRunning() const;
 
@@ -162,6 +164,7 @@ class Deputy {
   std::vector<std::unique_ptr<Command>> cmds_;
   HostUsage last_host_;
   double last_measure_s_ = -1.0;
+  uint64_t changes_ = 0;
 };
 
 }  // namespace fl::procman

@@ -30,6 +30,9 @@ struct DeputyNodeOptions {
   // Act on plain PMD_ORDERS2 (libbot2's unsigned orders). When false they are refused,
   // counted and logged ("unsigned").
   bool accept_unsigned = true;
+  // Subscribe to orders on LCM at all (false: the in-process deputy of a lone-ranger sheriff,
+  // which takes its sheriff's orders directly through HandleOrders).
+  bool subscribe_orders = true;
 };
 
 // Counts of orders the deputy did not act on, by reason (also in its status options).
@@ -69,6 +72,8 @@ class DeputyNode {
   int64_t applied_ = 0;
   std::map<std::string, std::string> options_extra_;
   int64_t next_status_us_ = 0;
+  int64_t last_status_us_ = 0;
+  uint64_t published_changes_ = 0;
   int64_t nonce_ = 0;
   StatusReporter status_;
 };
