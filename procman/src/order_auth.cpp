@@ -125,7 +125,8 @@ bool IsBlank(char c) { return c == ' ' || c == '\t' || c == '\r'; }
 
 // Parses the key file text (order_auth.hpp); errors name file and line, never the content.
 std::array<unsigned char, kKeyBytes> ParseKeyText(std::string_view text, const std::string& path) {
-  const std::string regen = "; regenerate it with `fl-procman-sheriff --new-key FILE`";
+  const std::string regen = "; remove it and make a new one with `fl-procman-sheriff --new-key " +
+                            path + "` (then copy it to every host)";
   std::array<unsigned char, kKeyBytes> bytes{};
   int key_line = 0;
   int line_no = 0;
@@ -239,8 +240,13 @@ Key LoadKey(const std::string& path) {
   if (fstat(fd.fd, &st) != 0) {
     throw KeyError("cannot stat procman key " + path + ": " + std::strerror(errno));
   }
+  if (S_ISDIR(st.st_mode)) {
+    throw KeyError("procman key " + path + " is a folder: give the key file itself, e.g. " + path +
+                   "/procman.key");
+  }
   if (!S_ISREG(st.st_mode)) {
-    throw KeyError("procman key " + path + " is not a regular file: " + NewKeyHint(path));
+    throw KeyError("procman key " + path + " is not a regular file: remove it and " +
+                   NewKeyHint(path));
   }
   if (st.st_uid != geteuid() && st.st_uid != 0) {
     throw KeyError("procman key " + path + " belongs to uid " + std::to_string(st.st_uid) +
