@@ -29,11 +29,12 @@ constexpr const char* kFusedPose = "FUSED_POSE";              // fusionloc.fused
 constexpr const char* kFusedTrajectory = "FUSED_TRAJECTORY";  // fusionloc.trajectory_t
 constexpr const char* kFusedMap = "FUSED_MAP";                // fusionloc.point_cloud_t (map frame)
 
-// ---- process management (libbot2's PMD_* channels, plus fusionloc's signed orders) ----
-// fusionloc.procman_signed_orders_t: a bot_procman.orders2_t with a MAC (order_auth.hpp).
-constexpr const char* kProcmanOrdersSigned = "PMD_ORDERS2_SIGNED";
-
 // ---- health: STATUS_<PROCESS>, e.g. STATUS_FL_SIM; subscribe "STATUS_.*" for all ----
 constexpr const char* kStatusPrefix = "STATUS_";
+
+// ---- signed procman orders (beyond libbot2; docs/PROCMAN_SECURITY.md) ----
+// fusionloc.procman_signed_orders_t: a bot_procman.orders2_t with a MAC, sheriff -> deputy
+// (procman/include/fusionloc/procman/order_auth.hpp).
+constexpr const char* kPmdOrdersSigned = "PMD_ORDERS2_SIGNED";
 
 }  // namespace fl::channels
