@@ -41,4 +41,9 @@ constexpr const char* kPmdSheriffCtl = "PMD_SHERIFF_CTL";
 // ---- health: STATUS_<PROCESS>, e.g. STATUS_FL_SIM; subscribe "STATUS_.*" for all ----
 constexpr const char* kStatusPrefix = "STATUS_";
 
+// ---- signed procman orders (beyond libbot2; docs/PROCMAN_SECURITY.md) ----
+// fusionloc.procman_signed_orders_t: a bot_procman.orders2_t with a MAC, sheriff -> deputy
+// (procman/include/fusionloc/procman/order_auth.hpp).
+constexpr const char* kPmdOrdersSigned = "PMD_ORDERS2_SIGNED";
+
 }  // namespace fl::channels
