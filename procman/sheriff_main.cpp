@@ -56,15 +56,19 @@ int main(int argc, char** argv) {
       "no state of its own: quit it and the deputies run on; a new sheriff picks up their "
       "state. Exit status 1 with --quit-after-script when a command failed.");
   fl::CommandLine& cli = program.cli();
-  std::string cfg_path, script, report_path;
+  std::string cfg_path, script, report_path, new_key;
   bool lone_ranger = false, observer = false, quit_after_script = false, show_output = false;
   double status_period_s = 10.0;
   fl::procman::SheriffOptions sheriff_options;
-  cli.AddPositional("CFG", &cfg_path, "procman config (libbot2 .cfg), e.g. config/procman/sim.cfg");
+  cli.AddPositional("CFG", &cfg_path, "procman config (libbot2 .cfg), e.g. config/procman/sim.cfg",
+                    false);
   cli.AddPositional("SCRIPT", &script, "script of the .cfg to run at start", false);
   cli.AddFlag("lone-ranger", &lone_ranger,
               "also run a deputy in this process (its orders come straight from this sheriff, "
               "never from the network): one command for a single-computer robot");
+  cli.AddFlag("new-key", &new_key,
+              "write a new random key to this file (mode 0600; refuses to overwrite) and exit; "
+              "copy it to every deputy's computer");
   cli.AddFlag("observer", &observer, "only watch and print the status; send no orders");
   cli.AddFlag("quit-after-script", &quit_after_script,
               "quit when SCRIPT is done (with --lone-ranger its commands are stopped)");
@@ -86,13 +90,18 @@ int main(int argc, char** argv) {
       {fl::procman::kCtlReplyChannel, "bot_procman.printf_t", "answers to fl-procman-ctl"}};
   fl::LcmProcess process(&program, inputs, outputs);
   cli.AddEpilog(
-      "\nThe deputy flags (--name, --log-dir, --var, --insecure) are for the --lone-ranger "
-      "deputy; its --name defaults to the one host of the .cfg.\n"
+      "\nOrders are signed (PMD_ORDERS2_SIGNED) with --key FILE, or with the default key file "
+      "if it exists; --insecure (or no key file) sends plain libbot2 PMD_ORDERS2, which only "
+      "deputies started with --insecure obey. --name, --log-dir and --var are for the "
+      "--lone-ranger deputy (its --name defaults to the one host of the .cfg), which takes "
+      "its orders from this sheriff directly.\n"
       "\nExamples:\n"
       "  fl-procman-sheriff --lone-ranger config/procman/sim.cfg demo --var BIN=build/bin\n"
       "  fl-procman-sheriff config/procman/robot.cfg bringup   # deputies on sensors, compute\n"
       "  fl-procman-sheriff --observer config/procman/robot.cfg\n");
   cli.AddCheck([&]() -> std::string {
+    if (!new_key.empty()) return "";
+    if (cfg_path.empty()) return "missing CFG (a procman .cfg); see --help";
     if (lone_ranger && observer) return "--lone-ranger and --observer exclude each other";
     if (observer && !script.empty()) return "an --observer runs no SCRIPT";
     if (quit_after_script && script.empty()) return "--quit-after-script needs a SCRIPT";
@@ -102,6 +111,17 @@ int main(int argc, char** argv) {
   if (!program.Parse(argc, argv)) return program.exit_code();
   sheriff_options.observer = observer;
   return program.Run([&] {
+    if (!new_key.empty()) {
+      try {
+        fl::procman::WriteNewKey(new_key);
+        const fl::procman::Key key = fl::procman::LoadKey(new_key);
+        std::cout << "new key " << key.id << " in " << new_key
+                  << "; copy it (mode 0600) to every deputy's computer\n";
+        return fl::kExitOk;
+      } catch (const fl::procman::KeyError& e) {
+        throw fl::UsageError(e.what());
+      }
+    }
     fl::procman::ProcmanConfig config = fl::procman::LoadProcmanConfig(cfg_path);
     if (!script.empty() && config.FindScript(script) == nullptr) {
       std::string known;
@@ -113,6 +133,39 @@ int main(int argc, char** argv) {
     auto lcm = process.Open();
     fl::procman::SheriffNode node(&sheriff, lcm.get(), process.channels(), {show_output},
                                   &std::cout);
+    // Signing: --key, else the default key file if there is one, unless --insecure.
+    std::unique_ptr<fl::procman::OrderSigner> signer;
+    if (!observer && !deputy_cli.insecure()) {
+      std::string path = deputy_cli.key_path();
+      if (path.empty()) {
+        try {
+          path = fl::procman::DefaultKeyPath();
+        } catch (const fl::procman::KeyError&) {
+        }
+        if (!path.empty() && access(path.c_str(), F_OK) != 0) path.clear();
+      }
+      if (!path.empty()) {
+        try {
+          char host[256] = {0};
+          gethostname(host, sizeof(host) - 1);
+          signer = std::make_unique<fl::procman::OrderSigner>(fl::procman::LoadKey(path),
+                                                              sheriff_options.name + "@" + host);
+        } catch (const fl::procman::KeyError& e) {
+          throw fl::UsageError(e.what());
+        }
+        std::cout << "orders signed with key " << signer->key_id() << " (" << path << ") on "
+                  << process.channels()(fl::channels::kPmdOrdersSigned) << "\n";
+        const std::string signed_channel = process.channels()(fl::channels::kPmdOrdersSigned);
+        node.set_orders_sink([&, signed_channel](const bot_procman::orders2_t& o) {
+          std::vector<uint8_t> bytes(static_cast<size_t>(o.getEncodedSize()));
+          o.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+          lcm->Publish(signed_channel, signer->Sign(bytes, fl::procman::WallClockUs()));
+        });
+      } else if (!lone_ranger) {
+        std::cout << "orders NOT signed (no --key and no key file at the default place): only "
+                     "deputies started with --insecure obey them\n";
+      }
+    }
     std::unique_ptr<fl::procman::Deputy> deputy;
     std::unique_ptr<fl::procman::DeputyNode> deputy_node;
     if (lone_ranger) {
@@ -126,9 +179,14 @@ int main(int argc, char** argv) {
       deputy_node = std::make_unique<fl::procman::DeputyNode>(deputy.get(), lcm.get(),
                                                               process.channels(), dn);
       deputy_node->SetStatusOption("security", "in-process: orders from its own sheriff only");
-      node.set_orders_sink([&](const bot_procman::orders2_t& o) {
-        node.PublishPlain(o);
-        deputy_node->HandleOrders(fl::procman::FromLcm(o), "its sheriff");
+      // Straight to the in-process deputy; other deputies (if the .cfg names other hosts)
+      // get them over LCM, signed or plain as above.
+      node.set_orders_sink([&, sink = node.orders_sink()](const bot_procman::orders2_t& o) {
+        if (o.host == deputy->name()) {
+          deputy_node->HandleOrders(fl::procman::FromLcm(o), "its sheriff");
+        } else {
+          sink(o);
+        }
       });
       // Its status straight to the sheriff as well (not only through LCM).
       sheriff.HandleStatus(deputy->MeasureStatus(fl::procman::WallClockUs()), Now());

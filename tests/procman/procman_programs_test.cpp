@@ -4,6 +4,7 @@
 // SIGKILL leaves no process behind.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -126,9 +127,9 @@ TEST(ProcmanPrograms, DeputySheriffCtlAndANewSheriffAdopts) {
   const pid_t deputy = Spawn("cd " + dir.path() + " && exec " + bin +
                              "/fl-procman-deputy --name one --insecure --log-dir logs --lcm-url '" +
                              url + "' > deputy.out 2>&1");
-  const std::string sheriff_cmd = "cd " + dir.path() + " && exec " + bin +
-                                  "/fl-procman-sheriff t.cfg --status-period 0 --lcm-url '" + url +
-                                  "' < /dev/null";
+  const std::string sheriff_cmd =
+      "cd " + dir.path() + " && exec " + bin +
+      "/fl-procman-sheriff t.cfg --insecure --status-period 0 --lcm-url '" + url + "' < /dev/null";
   pid_t sheriff = Spawn(sheriff_cmd + " > sheriff1.out 2>&1");
   const std::string ctl = bin + "/fl-procman-ctl --lcm-url '" + url + "' ";
   // The sheriff answers once it has found the deputy.
@@ -137,9 +138,8 @@ TEST(ProcmanPrograms, DeputySheriffCtlAndANewSheriffAdopts) {
   std::string status;
   ASSERT_TRUE(WaitFor([&] {
     status = RunCommand(ctl + "status", dir).out;
-    return status.find("g/sleeper") != std::string::npos &&
-           status.find("g/family") != std::string::npos &&
-           status.find("starting") == std::string::npos;
+    return status.find("g/sleeper               running") != std::string::npos &&
+           status.find("g/family                running") != std::string::npos;
   })) << status;
   EXPECT_NE(status.find("running"), std::string::npos) << status;
   const auto nothing = RunCommand(ctl + "stop nothing", dir);
@@ -152,8 +152,8 @@ TEST(ProcmanPrograms, DeputySheriffCtlAndANewSheriffAdopts) {
   sheriff = Spawn(sheriff_cmd + " > sheriff2.out 2>&1");
   ASSERT_TRUE(WaitFor([&] {
     status = RunCommand(ctl + "status", dir).out;
-    return status.find("g/sleeper") != std::string::npos;
-  }));
+    return status.find("g/sleeper               running") != std::string::npos;
+  })) << status;
   EXPECT_EQ(status.substr(status.find("g/sleeper"), 40), before) << status;  // same pid, run 1
   EXPECT_NE(Read(dir.file("sheriff2.out")).find("adopted g/sleeper on one (running"),
             std::string::npos)
@@ -184,8 +184,8 @@ TEST(ProcmanPrograms, DeputyKilledBySigkillLeavesNoProcess) {
                              "/fl-procman-deputy --name one --insecure --log-dir logs --lcm-url '" +
                              url + "' > deputy.out 2>&1");
   const pid_t sheriff = Spawn("cd " + dir.path() + " && exec " + bin +
-                              "/fl-procman-sheriff t.cfg --status-period 0 --lcm-url '" + url +
-                              "' < /dev/null > sheriff.out 2>&1");
+                              "/fl-procman-sheriff t.cfg --insecure --status-period 0 --lcm-url '" +
+                              url + "' < /dev/null > sheriff.out 2>&1");
   const std::string ctl = bin + "/fl-procman-ctl --lcm-url '" + url + "' ";
   ASSERT_TRUE(WaitFor([&] { return RunCommand(ctl + "start g", dir).status == 0; }));
   // The pids of both commands from the deputy's log lines.
@@ -215,6 +215,65 @@ TEST(ProcmanPrograms, DeputyKilledBySigkillLeavesNoProcess) {
       << "processes of the deputy's commands survived it";
   RunCommand(ctl + "quit", dir);
   waitpid(sheriff, nullptr, 0);
+}
+
+}  // namespace
+
+namespace {
+
+TEST(ProcmanPrograms, KeysSignedOrdersAndTheNoKeyError) {
+  const std::string url = Url(4);
+  if (!HaveMulticast(url)) GTEST_SKIP() << "no UDP multicast on this machine";
+  TempDir dir;
+  WriteFile(dir.file("t.cfg"), kCfg);
+  const std::string bin = BinDir();
+  const auto made = RunCommand(bin + "/fl-procman-sheriff --new-key keys/k", dir);
+  ASSERT_EQ(made.status, 0) << made.err;
+  EXPECT_NE(made.out.find("new key "), std::string::npos);
+  struct stat st;
+  ASSERT_EQ(stat(dir.file("keys/k").c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
+  const auto again = RunCommand(bin + "/fl-procman-sheriff --new-key keys/k", dir);
+  EXPECT_EQ(again.status, 2) << again.err;
+  // No key and no --insecure: the deputy says how to get one (exit 2).
+  const auto nokey = RunCommand("FUSIONLOC_PROCMAN_KEY=" + dir.file("none.key") + " " + bin +
+                                    "/fl-procman-deputy --name one --lcm-url '" + url + "'",
+                                dir);
+  EXPECT_EQ(nokey.status, 2);
+  EXPECT_NE(nokey.err.find("--insecure"), std::string::npos) << nokey.err;
+  EXPECT_NE(nokey.err.find("--new-key"), std::string::npos) << nokey.err;
+  // A key others may read is refused.
+  WriteFile(dir.file("open.key"), Read(dir.file("keys/k")));
+  chmod(dir.file("open.key").c_str(), 0644);
+  const auto open =
+      RunCommand(bin + "/fl-procman-deputy --key open.key --lcm-url '" + url + "'", dir);
+  EXPECT_EQ(open.status, 2);
+  EXPECT_NE(open.err.find("chmod 600"), std::string::npos) << open.err;
+  // Signed orders from a sheriff with the key act on a deputy with the key.
+  const pid_t deputy = Spawn("cd " + dir.path() + " && exec " + bin +
+                             "/fl-procman-deputy --name one --key keys/k --log-dir logs "
+                             "--lcm-url '" +
+                             url + "' > deputy.out 2>&1");
+  const pid_t sheriff = Spawn("cd " + dir.path() + " && exec " + bin +
+                              "/fl-procman-sheriff t.cfg --key keys/k --status-period 0 "
+                              "--lcm-url '" +
+                              url + "' < /dev/null > sheriff.out 2>&1");
+  const std::string ctl = bin + "/fl-procman-ctl --lcm-url '" + url + "' ";
+  ASSERT_TRUE(WaitFor([&] { return RunCommand(ctl + "start g/sleeper", dir).status == 0; }));
+  std::string status;
+  EXPECT_TRUE(WaitFor([&] {
+    status = RunCommand(ctl + "status", dir).out;
+    return status.find("g/sleeper               running") != std::string::npos;
+  })) << status
+      << Read(dir.file("deputy.out"));
+  EXPECT_NE(Read(dir.file("sheriff.out")).find("orders signed with key"), std::string::npos);
+  EXPECT_NE(Read(dir.file("deputy.out")).find("signed orders only"), std::string::npos);
+  RunCommand(ctl + "quit", dir);
+  waitpid(sheriff, nullptr, 0);
+  kill(deputy, SIGTERM);
+  int ws = 0;
+  waitpid(deputy, &ws, 0);
+  EXPECT_TRUE(WIFEXITED(ws) && WEXITSTATUS(ws) == 0);
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 #include "fusionloc/procman/deputy_cli.hpp"
 
 #include "fusionloc/common/channels.hpp"
+#include "fusionloc/procman/order_auth.hpp"
 
 namespace fl::procman {
 
@@ -24,6 +25,10 @@ DeputyCli::DeputyCli(Program* program, DeputyOptions* options) : options_(option
   cli.AddRepeatedFlag("var", &vars_,
                       "NAME=VALUE for ${NAME} in the commands' exec (repeatable; names not "
                       "given are looked up in the environment)");
+  cli.AddFlag("key", &key_path_,
+              "key file of the signed orders (mode 0600; made by fl-procman-sheriff --new-key); "
+              "default: $FUSIONLOC_PROCMAN_KEY, /etc/fusionloc/procman.key as root, else "
+              "$XDG_CONFIG_HOME/fusionloc/procman.key (~/.config/...)");
   cli.AddFlag("insecure", &insecure_,
               "act on unsigned PMD_ORDERS2 (libbot2's orders): anyone on the network can then "
               "make this deputy run anything; the status says so");
@@ -42,19 +47,43 @@ DeputyCli::DeputyCli(Program* program, DeputyOptions* options) : options_(option
 
 std::unique_ptr<DeputyNode> DeputyCli::MakeNode(Deputy* deputy, LcmInterface* lcm,
                                                 const ChannelMap& channels) const {
-  if (!insecure_) {
-    throw UsageError(
-        "orders are not signed in this build: start the deputy with --insecure to act on "
-        "plain libbot2 PMD_ORDERS2 (see docs/PROCMAN.md)");
+  std::string path = key_path_;
+  if (path.empty() && !insecure_) {
+    try {
+      path = DefaultKeyPath();
+    } catch (const KeyError& e) {
+      throw UsageError(std::string(e.what()) + "; give --key FILE, or --insecure");
+    }
+  }
+  std::unique_ptr<OrderVerifier> verifier;
+  std::string key_id;
+  if (!path.empty()) {
+    try {
+      Key key = LoadKey(path);
+      key_id = key.id;
+      verifier = std::make_unique<OrderVerifier>(std::vector<Key>{key}, OrderVerifier::Options());
+    } catch (const KeyError& e) {
+      throw UsageError(std::string(e.what()) +
+                       (key_path_.empty() ? " (the default key file; make one with "
+                                            "fl-procman-sheriff --new-key FILE, give --key "
+                                            "FILE, or start with --insecure)"
+                                          : ""));
+    }
   }
   DeputyNodeOptions o;
   o.accept_unsigned = insecure_;
-  return std::make_unique<DeputyNode>(deputy, lcm, channels, o);
-}
-
-std::string DeputyCli::SecurityLine() const {
-  return insecure_ ? "INSECURE: acts on unsigned PMD_ORDERS2 from anyone on the network"
-                   : "signed orders only";
+  auto node = std::make_unique<DeputyNode>(deputy, lcm, channels, o);
+  if (verifier) node->EnableSignedOrders(std::move(verifier), channels);
+  if (insecure_) {
+    security_ =
+        key_id.empty()
+            ? "INSECURE: acts on unsigned PMD_ORDERS2 from anyone on the network"
+            : "INSECURE: acts on unsigned PMD_ORDERS2 and on orders signed with key " + key_id;
+  } else {
+    security_ = "signed orders only (key " + key_id + " from " + path + ")";
+  }
+  node->SetStatusOption("security", security_);
+  return node;
 }
 
 }  // namespace fl::procman

@@ -224,6 +224,8 @@ DeputyNode::DeputyNode(Deputy* deputy, LcmInterface* lcm, const ChannelMap& chan
                                                        : "signed orders only");
 }
 
+DeputyNode::~DeputyNode() { deputy_->set_output(nullptr); }
+
 void DeputyNode::Printf(int32_t sheriff_id, const std::string& text) {
   bot_procman::printf_t p;
   p.utime = WallClockUs();
@@ -234,10 +236,38 @@ void DeputyNode::Printf(int32_t sheriff_id, const std::string& text) {
 }
 
 void DeputyNode::Refuse(const std::string& kind, const std::string& reason) {
-  ++refused_.by_reason[kind];
+  const int64_t n = ++refused_.by_reason[kind];
   status_.CountDropped(reason);
-  FL_LOG(WARN) << "refused orders: " << reason;
-  Printf(0, "refused orders: " + reason + "\n");
+  // Logged (and told on PMD_PRINTF) at most every 5 s per kind: a rogue sender at 1 kHz must
+  // not flood the log; the counts in the status are exact.
+  auto it = refusal_log_.try_emplace(kind, 5.0).first;
+  it->second.Warn("refused orders (" + kind + ", " + std::to_string(n) + " so far): " + reason);
+  if (n == 1 || n % 100 == 0) Printf(0, "refused orders (" + kind + "): " + reason + "\n");
+}
+
+void DeputyNode::EnableSignedOrders(std::unique_ptr<OrderVerifier> verifier,
+                                    const ChannelMap& channels) {
+  verifier_ = std::move(verifier);
+  lcm_->Subscribe<fusionloc::procman_signed_orders_t>(
+      channels(channels::kPmdOrdersSigned),
+      [this](const fusionloc::procman_signed_orders_t& env, const std::string&) {
+        std::vector<uint8_t> encoded;
+        const OrderVerifier::Verdict v = verifier_->Verify(env, WallClockUs(), &encoded);
+        if (v != OrderVerifier::Verdict::kOk) {
+          static const char* kKinds[] = {"ok",      "malformed", "unknown_key",
+                                         "bad_mac", "stale",     "replayed"};
+          Refuse(kKinds[static_cast<int>(v)], verifier_->last_detail());
+          return;
+        }
+        bot_procman::orders2_t orders;
+        if (orders.decode(encoded.data(), 0, static_cast<int>(encoded.size())) !=
+            static_cast<int>(encoded.size())) {
+          Refuse("malformed", "a signed envelope from '" + env.sheriff_id +
+                                  "' holds no valid bot_procman.orders2_t");
+          return;
+        }
+        HandleOrders(FromLcm(orders), "PMD_ORDERS2_SIGNED");
+      });
 }
 
 void DeputyNode::HandleOrders(const Orders& orders, const std::string& source) {

@@ -1,5 +1,10 @@
 // The deputy's command-line flags, shared by fl-procman-deputy and the in-process deputy of
-// fl-procman-sheriff --lone-ranger: --name, --log-dir, --var NAME=VALUE, --insecure.
+// fl-procman-sheriff --lone-ranger: --name, --log-dir, --var NAME=VALUE, --key, --insecure.
+//
+// Order policy: with a key (--key FILE, else the default key file, DefaultKeyPath() in
+// order_auth.hpp) the deputy acts on signed orders (PMD_ORDERS2_SIGNED) only; --insecure
+// also accepts plain libbot2 PMD_ORDERS2 (alone: plain orders only). Neither, and no key
+// file: a usage error naming both ways.
 #pragma once
 
 #include <memory>
@@ -21,13 +26,17 @@ class DeputyCli {
   // The node for `deputy`, with the order policy the flags chose.
   std::unique_ptr<DeputyNode> MakeNode(Deputy* deputy, LcmInterface* lcm,
                                        const ChannelMap& channels) const;
-  // "signed orders only (key ...)" or "INSECURE: ...", for the log.
-  std::string SecurityLine() const;
+  const std::string& key_path() const { return key_path_; }
+  bool insecure() const { return insecure_; }
+  // "signed orders only (key ...)" or "INSECURE: ...", for the log (after MakeNode).
+  std::string SecurityLine() const { return security_; }
 
  private:
   DeputyOptions* options_;
   std::vector<std::string> vars_;
+  std::string key_path_;
   bool insecure_ = false;
+  mutable std::string security_;
 };
 
 }  // namespace fl::procman

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <string>
 
 #include "fusionloc/common/channel_map.hpp"
@@ -11,6 +12,7 @@
 #include "fusionloc/common/status_reporter.hpp"
 #include "fusionloc/procman/bot_procman_types.hpp"
 #include "fusionloc/procman/deputy.hpp"
+#include "fusionloc/procman/order_auth.hpp"
 
 namespace fl::procman {
 
@@ -45,6 +47,9 @@ class DeputyNode {
  public:
   DeputyNode(Deputy* deputy, LcmInterface* lcm, const ChannelMap& channels,
              DeputyNodeOptions options = DeputyNodeOptions());
+  ~DeputyNode();  // unhooks the deputy's output
+  DeputyNode(const DeputyNode&) = delete;
+  DeputyNode& operator=(const DeputyNode&) = delete;
   // Polls the deputy and publishes its status when due. Call often (~10 ms).
   void Poll();
   const RefusedOrders& refused() const { return refused_; }
@@ -55,6 +60,9 @@ class DeputyNode {
   void SetStatusOption(const std::string& key, const std::string& value) {
     options_extra_[key] = value;
   }
+  // Acts on signed orders (PMD_ORDERS2_SIGNED) that `verifier` accepts; refusals are counted
+  // by verdict and logged (rate-limited) with the reason.
+  void EnableSignedOrders(std::unique_ptr<OrderVerifier> verifier, const ChannelMap& channels);
   // Logs and counts an order not acted on; `kind` is its counter (unsigned, stale, bad_mac,
   // unknown_key, replayed, malformed), `reason` the log line.
   void Refuse(const std::string& kind, const std::string& reason);
@@ -76,6 +84,8 @@ class DeputyNode {
   uint64_t published_changes_ = 0;
   int64_t nonce_ = 0;
   StatusReporter status_;
+  std::unique_ptr<OrderVerifier> verifier_;
+  std::map<std::string, RateLimitedWarning> refusal_log_;
 };
 
 }  // namespace fl::procman

@@ -30,6 +30,7 @@ class SheriffNode {
   SheriffNode(Sheriff* sheriff, LcmInterface* lcm, const ChannelMap& channels,
               SheriffNodeOptions options, std::ostream* out);
   void set_orders_sink(OrdersSink sink) { sink_ = std::move(sink); }
+  const OrdersSink& orders_sink() const { return sink_; }
   // Sends due orders, advances scripts, prints events. Call often.
   void Poll();
   // A text order from the terminal (or fl-procman-ctl); returns the reply.
