@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -261,8 +262,18 @@ void Deputy::Poll() {
     DrainOutput(c);
     if (st.pid > 0) {
       int ws = 0;
-      const pid_t r = waitpid(st.pid, &ws, WNOHANG);
+      rusage ru{};
+      const pid_t r = wait4(st.pid, &ws, WNOHANG, &ru);
       if (r == st.pid) {
+        // The exact totals of the run (it and the children it waited for).
+        const double run_cpu_s =
+            static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+            1e-6 * static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
+        st.cpu_time_s = std::max(
+            st.cpu_time_s,
+            static_cast<double>(c->ticks_before_this_run) / ClockTicksPerSecond() + run_cpu_s);
+        st.peak_rss_bytes =
+            std::max<int64_t>(st.peak_rss_bytes, static_cast<int64_t>(ru.ru_maxrss) * 1024);
         OnExit(c, ws);
         continue;
       }

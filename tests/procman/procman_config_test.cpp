@@ -2,7 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+#include <set>
+
 #include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/procman/shell_words.hpp"
 #include "test_paths.hpp"
 
 namespace fl::procman {
@@ -176,6 +180,49 @@ TEST(ProcmanConfig, MissingFileIsAClearError) {
     EXPECT_NE(std::string(e.what()).find("cannot read procman config '/nonexistent/x.cfg'"),
               std::string::npos);
   }
+}
+
+}  // namespace
+}  // namespace fl::procman
+
+namespace fl::procman {
+namespace {
+
+// The shipped configs parse, and every exec splits with the variables ./fusionloc gives.
+TEST(ProcmanConfig, ShippedConfigsParseAndSplit) {
+  const std::map<std::string, std::string> vars = {
+      {"BIN", "/b"},        {"CONFIG", "/c"},
+      {"RUN_DIR", "/r"},    {"WORLD", "paper"},
+      {"RATE", "1"},        {"DURATION", "-1"},
+      {"LOG", "/l.lcmlog"}, {"LCM_URL", "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216"}};
+  for (const char* name : {"sim", "robot", "replay"}) {
+    const ProcmanConfig c =
+        LoadProcmanConfig(std::string(FL_SOURCE_DIR) + "/config/procman/" + name + ".cfg");
+    EXPECT_GE(c.commands.size(), 5u) << name;
+    for (const CommandConfig& cmd : c.commands) {
+      std::vector<std::string> words;
+      std::string error;
+      EXPECT_TRUE(SplitShellWords(cmd.exec, vars, &words, &error))
+          << name << " " << cmd.name << ": " << error;
+    }
+  }
+  const ProcmanConfig sim =
+      LoadProcmanConfig(std::string(FL_SOURCE_DIR) + "/config/procman/sim.cfg");
+  ASSERT_NE(sim.FindScript("demo"), nullptr);
+  std::set<std::string> hosts;
+  for (const CommandConfig& cmd : sim.commands) hosts.insert(cmd.host);
+  EXPECT_EQ(hosts.size(), 1u);  // one computer: --lone-ranger names its deputy after it
+  const ProcmanConfig robot =
+      LoadProcmanConfig(std::string(FL_SOURCE_DIR) + "/config/procman/robot.cfg");
+  for (const CommandConfig& cmd : robot.commands) {
+    EXPECT_EQ(cmd.host, cmd.group == "drivers" ? "sensors" : "compute") << cmd.path();
+  }
+  const ProcmanConfig replay =
+      LoadProcmanConfig(std::string(FL_SOURCE_DIR) + "/config/procman/replay.cfg");
+  std::vector<std::string> words;
+  std::string error;
+  ASSERT_TRUE(SplitShellWords(replay.commands.back().exec, vars, &words, &error));
+  EXPECT_EQ(words[2], "--regexp=^(LASER|ODOMETRY|STEREO|STEREO_CALIBRATION|GROUND_TRUTH)$");
 }
 
 }  // namespace
