@@ -61,6 +61,10 @@ std::vector<std::string> Sheriff::TakeEvents() {
 void Sheriff::HandleStatus(const HostStatus& status, double /*now_s*/) {
   HostState& host = hosts_[status.host];
   host.reported = true;
+  if (status.mem_total_bytes > 0) {  // a full status (not the lone ranger's quick one)
+    host.last = status;
+    host.last.cmds.clear();
+  }
   for (size_t i = 0; i < cmds_.size(); ++i) {
     if (config_.commands[i].host == status.host) cmds_[i].seen = false;
   }
@@ -353,6 +357,29 @@ std::string Sheriff::StatusTable() const {
       << r.starts << std::setw(9) << r.respawns << std::setw(8) << ExitText(r) << std::setw(7)
       << cpu << std::setw(9) << Mb(r.rss_bytes);
     if (!r.error.empty()) o << "  (" << r.error << ")";
+    o << "\n";
+  }
+  for (const std::string& host : Hosts()) {
+    auto it = hosts_.find(host);
+    if (it == hosts_.end() || !it->second.reported) {
+      o << "host " << host << ": no status from its deputy\n";
+      continue;
+    }
+    const HostStatus& h = it->second.last;
+    if (h.mem_total_bytes <= 0) continue;
+    char line[160];
+    std::snprintf(line, sizeof(line), "host %s: load %.0f%%, memory %.1f of %.1f GB free",
+                  host.c_str(), h.cpu_load * 100.0, h.mem_free_bytes / 1e9,
+                  h.mem_total_bytes / 1e9);
+    o << line;
+    auto opt = [&](const char* k) {
+      auto f = h.options.find(k);
+      return f == h.options.end() ? std::string() : f->second;
+    };
+    if (!opt("security").empty()) o << "; " << opt("security");
+    if (!opt("refused_orders").empty() && opt("refused_orders") != "0") {
+      o << "; refused orders " << opt("refused_orders");
+    }
     o << "\n";
   }
   return o.str();

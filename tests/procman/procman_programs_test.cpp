@@ -142,6 +142,12 @@ TEST(ProcmanPrograms, DeputySheriffCtlAndANewSheriffAdopts) {
            status.find("g/family                running") != std::string::npos;
   })) << status;
   EXPECT_NE(status.find("running"), std::string::npos) << status;
+  // The host line: load, memory, and that this deputy obeys unsigned orders.
+  ASSERT_TRUE(WaitFor([&] {
+    status = RunCommand(ctl + "status", dir).out;
+    return status.find("host one: load") != std::string::npos;
+  })) << status;
+  EXPECT_NE(status.find("INSECURE: acts on unsigned PMD_ORDERS2"), std::string::npos) << status;
   const auto nothing = RunCommand(ctl + "stop nothing", dir);
   EXPECT_EQ(nothing.status, 1);
   EXPECT_NE(nothing.out.find("no command or group 'nothing'"), std::string::npos);

@@ -73,7 +73,8 @@ class Sheriff {
   }
   std::set<std::string> Hosts() const;
 
-  // The live table: host, command, state, pid, run, starts, respawns, last exit, CPU, memory.
+  // The live table: host, command, state, pid, run, starts, respawns, last exit, CPU, memory;
+  // then a line per host: load, memory, order security, refused orders.
   std::string StatusTable() const;
   // The process table for a report: starts, restarts, last exit, CPU time, peak memory.
   std::string ReportTable() const;
@@ -90,6 +91,7 @@ class Sheriff {
   };
   struct HostState {
     bool reported = false;  // its deputy's status arrived
+    HostStatus last;        // its last status (host fields and options)
     bool ordered = false;  // orders sent (adoption is over)
     double last_orders_s = -1e9;
   };
