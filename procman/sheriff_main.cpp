@@ -101,7 +101,6 @@ int main(int argc, char** argv) {
       "  fl-procman-sheriff --observer config/procman/robot.cfg\n");
   cli.AddCheck([&]() -> std::string {
     if (!new_key.empty()) return "";
-    if (cfg_path.empty()) return "missing CFG (a procman .cfg); see --help";
     if (lone_ranger && observer) return "--lone-ranger and --observer exclude each other";
     if (observer && !script.empty()) return "an --observer runs no SCRIPT";
     if (quit_after_script && script.empty()) return "--quit-after-script needs a SCRIPT";
@@ -122,6 +121,7 @@ int main(int argc, char** argv) {
         throw fl::UsageError(e.what());
       }
     }
+    if (cfg_path.empty()) throw fl::UsageError("missing CFG (a procman .cfg)");
     fl::procman::ProcmanConfig config = fl::procman::LoadProcmanConfig(cfg_path);
     if (!script.empty() && config.FindScript(script) == nullptr) {
       std::string known;
