@@ -92,7 +92,7 @@ class Sheriff {
   struct HostState {
     bool reported = false;  // its deputy's status arrived
     HostStatus last;        // its last status (host fields and options)
-    bool ordered = false;  // orders sent (adoption is over)
+    bool ordered = false;   // orders sent (adoption is over)
     double last_orders_s = -1e9;
   };
   struct Frame {
@@ -111,7 +111,7 @@ class Sheriff {
   SheriffOptions options_;
   std::vector<Cmd> cmds_;
   std::map<std::string, HostState> hosts_;
-  std::set<std::string> dirty_;             // hosts whose orders changed
+  std::set<std::string> dirty_;  // hosts whose orders changed
   double start_s_ = -1.0;
   std::vector<Frame> frames_;
   std::vector<std::string> queued_;
