@@ -57,7 +57,7 @@ double MaxError(const std::vector<fl::Pose2>& a, const std::vector<fl::Pose2>& b
 TEST(ReferenceRefit, TheTruthStaysWhereItIs) {
   const test::LoopRun run = StraightLoopRun();
   const std::vector<RefitScan> scans = LoopScans(run);
-  const RefitResult r = RefitReference(scans, Options(), Sigma(), RefitOptions());
+  const RefitResult r = RefitReference(scans, fl::Pose2(), Options(), Sigma(), RefitOptions());
   ASSERT_EQ(r.T_world_base.size(), scans.size());
   EXPECT_EQ(r.odometry_edges, static_cast<int>(scans.size()) - 1);
   // Every scan pairs with its predecessor, and with earlier scans where the loop closes.
@@ -77,7 +77,7 @@ TEST(ReferenceRefit, ABentReferenceIsPulledBackByTheScans) {
   std::vector<fl::Pose2> bent;
   for (const RefitScan& s : scans) bent.push_back(s.T_world_base_reference);
   ASSERT_NEAR(MaxError(bent, run.truth), 0.15, 1e-9);
-  const RefitResult r = RefitReference(scans, Options(), Sigma(), RefitOptions());
+  const RefitResult r = RefitReference(scans, fl::Pose2(), Options(), Sigma(), RefitOptions());
   // The optimum is back at the truth, 0.15 m from the bent reference.
   EXPECT_LT(MaxError(r.T_world_base, run.truth), 0.03);
   EXPECT_GT(MaxError(r.T_world_base, bent), 0.12);
@@ -91,12 +91,12 @@ TEST(ReferenceRefit, BadInputIsAClearError) {
   bad.max_pairs = -1;
   EXPECT_FALSE(bad.Validate().ok());
   EXPECT_NE(bad.Validate().message().find("refit.max_pairs"), std::string::npos);
-  EXPECT_THROW(RefitReference(scans, Options(), Sigma(), bad), std::invalid_argument);
-  EXPECT_THROW(RefitReference({scans[0]}, Options(), Sigma(), RefitOptions()),
+  EXPECT_THROW(RefitReference(scans, fl::Pose2(), Options(), Sigma(), bad), std::invalid_argument);
+  EXPECT_THROW(RefitReference({scans[0]}, fl::Pose2(), Options(), Sigma(), RefitOptions()),
                std::invalid_argument);
   scans[5].scan.utime = scans[4].scan.utime;
   try {
-    RefitReference(scans, Options(), Sigma(), RefitOptions());
+    RefitReference(scans, fl::Pose2(), Options(), Sigma(), RefitOptions());
     FAIL() << "a repeated time stamp must be an error";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("scan 5"), std::string::npos) << e.what();

@@ -7,12 +7,12 @@
 #include <map>
 
 #include "bot_core/pose_t.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusion_fixtures.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/point_cloud_t.hpp"
 #include "fusionloc/relative_pose_factor_t.hpp"
-#include "fusionloc/stereo_calibration_t.hpp"
 #include "fusionloc/trajectory_t.hpp"
 #include "test_paths.hpp"
 
@@ -46,17 +46,15 @@ TEST(FusionMain, ReplaysALogAndPublishesFusedOutputsAndMap) {
   const std::string in = dir.file("in.lcmlog");
   {
     LcmLogWriter log(in);
-    fusionloc::stereo_calibration_t cal{};
-    cal.utime = d.rbpf.front().utime;
-    cal.T_base_camera.trans[0] = 0.2;  // camera 0.2 m ahead, optical axes: z fwd, x right
+    bot_core::rigid_transform_t camera_to_base{};  // T_base_camera: 0.2 m ahead, 0.5 m up,
+    camera_to_base.utime = d.rbpf.front().utime;   // optical axes: z forward, x right
     const Eigen::Matrix3d R_base_camera =
         (Eigen::Matrix3d() << 0, 0, 1, -1, 0, 0, 0, -1, 0).finished();
     Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
     T.linear() = R_base_camera;
     T.translation() = Eigen::Vector3d(0.2, 0, 0.5);
-    IsometryToArrays(T, cal.T_base_camera.trans, cal.T_base_camera.quat);
-    cal.T_base_laser.quat[0] = 1;
-    log.Write("STEREO_CALIBRATION", cal, cal.utime);
+    IsometryToArrays(T, camera_to_base.trans, camera_to_base.quat);
+    log.Write("CAMERA_TO_BASE", camera_to_base, camera_to_base.utime);
     size_t lf = 0, vf = 0;
     for (size_t k = 0; k < d.rbpf.size(); ++k) {
       const Utime t = d.rbpf[k].utime;

@@ -60,6 +60,13 @@ struct LogContents {
     const auto it = data.find(channel);
     return it == data.end() ? 0 : it->second.size();
   }
+  // Position in the log of the n-th event on `channel` (npos if there is none).
+  size_t IndexOf(const std::string& channel, size_t n) const {
+    for (size_t i = 0; i < channel_order.size(); ++i) {
+      if (channel_order[i] == channel && n-- == 0) return i;
+    }
+    return std::string::npos;
+  }
   template <class Msg>
   Msg Decode(const std::string& channel, size_t i) const {
     Msg msg;

@@ -7,6 +7,7 @@
 
 #include "bot_core/images_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/stereo_calibration_t.hpp"
@@ -69,7 +70,8 @@ TEST(KittiTest, ConvertsTheRealDrive) {
   EXPECT_GE(s.messages.at(channels::kStereoCalibration), 1);
   EXPECT_TRUE(s.warnings.empty());
   const auto log = fl::test::ReadLog(out);
-  EXPECT_EQ(log.channel_order[0], channels::kStereoCalibration);
+  EXPECT_EQ(log.channel_order[0], channels::kCameraToBase);  // the mounting, then the intrinsics
+  EXPECT_EQ(log.channel_order[1], channels::kStereoCalibration);
   const auto cal = log.Decode<fusionloc::stereo_calibration_t>(channels::kStereoCalibration, 0);
   EXPECT_EQ(cal.width, 1242);
   EXPECT_EQ(cal.height, 375);
@@ -135,9 +137,11 @@ TEST(KittiTest, GroundTruthIsTheBaseFramePose) {
   EXPECT_EQ(pair.images[1].data[0], 3);     // right = 0 + 2 * 1 + 1
   const auto cal = log.Decode<fusionloc::stereo_calibration_t>(channels::kStereoCalibration, 0);
   EXPECT_DOUBLE_EQ(cal.baseline, 0.5);
-  // T_base_camera: rotation optical -> base, no translation for cam0.
-  const Eigen::Isometry3d T_bc =
-      IsometryFromArrays(cal.T_base_camera.trans, cal.T_base_camera.quat);
+  // CAMERA_TO_BASE (T_base_camera) comes first: rotation optical -> base, no translation for
+  // cam0.
+  ASSERT_LT(log.IndexOf(channels::kCameraToBase, 0), log.IndexOf(channels::kStereoCalibration, 0));
+  const auto mount = log.Decode<bot_core::rigid_transform_t>(channels::kCameraToBase, 0);
+  const Eigen::Isometry3d T_bc = IsometryFromArrays(mount.trans, mount.quat);
   EXPECT_TRUE(T_bc.linear().isApprox(RotationBaseCamera(), 1e-12));
   EXPECT_NEAR(T_bc.translation().norm(), 0.0, 1e-12);
 }
@@ -173,7 +177,8 @@ TEST(KittiTest, OdometryLayoutColourToGrayAndEpoch) {
   const auto cal = log.Decode<fusionloc::stereo_calibration_t>(channels::kStereoCalibration, 0);
   EXPECT_DOUBLE_EQ(cal.baseline, 0.5);  // (5 - (-20)) / 50
   // The left colour camera sits 0.1 m to the left of cam0 (P2 tx = 5 / 50): +y in base.
-  EXPECT_NEAR(cal.T_base_camera.trans[1], 0.1, 1e-12);
+  EXPECT_NEAR(log.Decode<bot_core::rigid_transform_t>(channels::kCameraToBase, 0).trans[1], 0.1,
+              1e-12);
 }
 
 TEST(KittiTest, OxtsPosesReproduceThePoseFile) {

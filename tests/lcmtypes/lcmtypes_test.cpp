@@ -107,9 +107,12 @@ TEST(LcmTypes, ProjectTypesRoundTrip) {
   cal.fx = 500;
   cal.baseline = 0.12;
   cal.rectified = true;
-  cal.T_base_camera.quat[0] = 1;
-  cal.T_base_laser.trans[0] = 0.2;
-  EXPECT_DOUBLE_EQ(RoundTrip(cal).T_base_laser.trans[0], 0.2);
+  EXPECT_DOUBLE_EQ(RoundTrip(cal).baseline, 0.12);
+
+  bot_core::rigid_transform_t mount{};  // LASER_TO_BASE / CAMERA_TO_BASE
+  mount.trans[0] = 0.2;
+  mount.quat[0] = 1;
+  EXPECT_DOUBLE_EQ(RoundTrip(mount).trans[0], 0.2);
 
   fusionloc::relative_pose_factor_t f{};
   f.utime_i = 1;

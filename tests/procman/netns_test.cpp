@@ -111,7 +111,9 @@ TEST(ProcmanNetns, TwoHostsOneSheriffFusedPosesAcrossTheLink) {
   ASSERT_EQ(Sh(bin + "/fl-procman-sheriff --new-key " + dir.file("robot.key")), 0);
   ASSERT_EQ(Sh(bin + "/fl-procman-sheriff --new-key " + dir.file("other.key")), 0);
   std::ofstream(dir.file("two.cfg"))
-      << "cmd \"sim\" { exec = \"${BIN}/fl-sim --lcm-url=${LCM_URL} --world paper --rate 2 "
+      << "cmd \"sim\" { exec = \"${BIN}/fl-sim --lcm-url=${LCM_URL} --robot "
+         "${CONFIG}/robot/sim.yaml "
+         "--world paper --rate 2 "
          "--duration 8\"; host = \"sensors\"; stop_signal = 15; }\n"
          "group \"estimators\" {\n"
          "  cmd \"rbpf_slam\" { exec = \"${BIN}/fl-rbpf-slam --lcm-url=${LCM_URL} --config "

@@ -191,10 +191,15 @@ namespace {
 // The shipped configs parse, and every exec splits with the variables ./fusionloc gives.
 TEST(ProcmanConfig, ShippedConfigsParseAndSplit) {
   const std::map<std::string, std::string> vars = {
-      {"BIN", "/b"},        {"CONFIG", "/c"},
-      {"RUN_DIR", "/r"},    {"WORLD", "paper"},
-      {"RATE", "1"},        {"DURATION", "-1"},
-      {"LOG", "/l.lcmlog"}, {"LCM_URL", "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216"}};
+      {"BIN", "/b"},
+      {"CONFIG", "/c"},
+      {"RUN_DIR", "/r"},
+      {"WORLD", "paper"},
+      {"RATE", "1"},
+      {"ROBOT", "sim"},
+      {"DURATION", "-1"},
+      {"LOG", "/l.lcmlog"},
+      {"LCM_URL", "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216"}};
   for (const char* name : {"sim", "robot", "replay"}) {
     const ProcmanConfig c =
         LoadProcmanConfig(std::string(FL_SOURCE_DIR) + "/config/procman/" + name + ".cfg");
@@ -222,7 +227,9 @@ TEST(ProcmanConfig, ShippedConfigsParseAndSplit) {
   std::vector<std::string> words;
   std::string error;
   ASSERT_TRUE(SplitShellWords(replay.commands.back().exec, vars, &words, &error));
-  EXPECT_EQ(words[2], "--regexp=^(LASER|ODOMETRY|STEREO|STEREO_CALIBRATION|GROUND_TRUTH)$");
+  EXPECT_EQ(words[2],
+            "--regexp=^(LASER|ODOMETRY|STEREO|STEREO_CALIBRATION|LASER_TO_BASE|CAMERA_TO_BASE|"
+            "GROUND_TRUTH)$");
 }
 
 }  // namespace

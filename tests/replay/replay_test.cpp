@@ -79,25 +79,41 @@ TEST(Replay, SameLogAndConfigGiveAByteIdenticalOutput) {
   EXPECT_EQ(RunCommand("cmp a.lcmlog c.lcmlog", dir).status, 0);
 }
 
+// A robot without a camera: laser, odometry and the laser's mounting (LASER_TO_BASE) only.
 TEST(Replay, ALaserOnlyLogRunsTheRbpfAndTheFusion) {
   TempDir dir;
   const std::string log = SimLog(dir, "sim.lcmlog", 8.0);
-  Filter(log, dir.file("laser.lcmlog"), {"LASER", "ODOMETRY", "GROUND_TRUTH"});
+  Filter(log, dir.file("laser.lcmlog"), {"LASER", "ODOMETRY", "GROUND_TRUTH", "LASER_TO_BASE"});
   fl::replay::ReplayOptions o;
   o.in_path = dir.file("laser.lcmlog");
   o.out_path = dir.file("out.lcmlog");
   o.config_dir = fl::test::SourceDir() + "/config";
   testing::internal::CaptureStderr();
   const fl::replay::ReplayReport r = fl::replay::RunReplay(o);
-  testing::internal::GetCapturedStderr();
+  const std::string err = testing::internal::GetCapturedStderr();
   ASSERT_EQ(r.stages.size(), 3u);
   EXPECT_TRUE(r.stages[0].missing.empty());  // fl-rbpf-slam
-  EXPECT_EQ(r.stages[1].missing, (std::vector<std::string>{"STEREO", "STEREO_CALIBRATION"}));
+  EXPECT_EQ(r.stages[1].missing,
+            (std::vector<std::string>{"STEREO", "STEREO_CALIBRATION", "CAMERA_TO_BASE"}));
   EXPECT_TRUE(r.stages[2].missing.empty());  // fl-fusion, fed by the RBPF
   EXPECT_GT(r.data_s, 7.0);
+  // The RBPF took the simulated robot's mounting (config/robot/sim.yaml: 0.15 m ahead).
+  EXPECT_NE(err.find("T_base_laser from LASER_TO_BASE: x 0.15 y 0 yaw 0"), std::string::npos)
+      << err;
+  EXPECT_EQ(err.find("no LASER_TO_BASE before the first scan"), std::string::npos) << err;
   const auto out = Count(dir.file("out.lcmlog"));
   EXPECT_EQ(out.at("FUSED_POSE"), out.at("LASER"));
   EXPECT_EQ(out.count("VO_POSE"), 0u);
+
+  // Without the mounting the laser is taken to be at the base origin, and the log says so.
+  Filter(log, dir.file("bare.lcmlog"), {"LASER", "ODOMETRY", "GROUND_TRUTH"});
+  o.in_path = dir.file("bare.lcmlog");
+  o.out_path = dir.file("bare_out.lcmlog");
+  testing::internal::CaptureStderr();
+  fl::replay::RunReplay(o);
+  const std::string bare = testing::internal::GetCapturedStderr();
+  EXPECT_NE(bare.find("no LASER_TO_BASE before the first scan"), std::string::npos) << bare;
+  EXPECT_EQ(Count(dir.file("bare_out.lcmlog")).at("FUSED_POSE"), out.at("LASER"));
 }
 
 TEST(Replay, ClearFailures) {

@@ -3,8 +3,10 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "test_paths.hpp"
 
@@ -59,8 +61,43 @@ TEST(SimMainTest, WritesALogFromAConfigFile) {
   fl::LcmLogEvent ev;
   int events = 0, stereo = 0;
   while (reader.Next(&ev)) ++events, stereo += ev.channel == "STEREO";
-  EXPECT_EQ(events, 6 * 3 + 1 + 2);  // 6 steps x (truth, odometry, laser) + calib + 2 pairs
+  // 6 steps x (truth, odometry, laser) + calibration + 2 pairs + LASER_TO_BASE, CAMERA_TO_BASE
+  EXPECT_EQ(events, 6 * 3 + 1 + 2 + 2);
   EXPECT_EQ(stereo, 2);
+}
+
+// --channel renames in a log as it does live; a robot description moves the laser.
+TEST(SimMainTest, RenamesChannelsAndTakesTheRobotDescriptionInALog) {
+  fl::test::TempDir dir;
+  std::string out;
+  const std::string robot = dir.file("robot.yaml");
+  std::ofstream(robot) << "name: moved\nlaser: {xyz_m: [0.25, 0.05, 0.2]}\n"
+                          "camera: {xyz_m: [0.2, 0.06, 0.5], rpy_deg: [-90, 0, -90]}\n";
+  const std::string log = dir.file("sim.lcmlog");
+  ASSERT_EQ(RunCommand(kSim + " --duration 0.3 --channel LASER=FRONT_LASER --robot " + robot +
+                           " --log " + log,
+                       &out),
+            0)
+      << out;
+  fl::LcmLogReader reader(log);
+  fl::LcmLogEvent ev;
+  int laser = 0, front = 0;
+  bot_core::rigid_transform_t mount{};
+  while (reader.Next(&ev)) {
+    laser += ev.channel == "LASER";
+    front += ev.channel == "FRONT_LASER";
+    if (ev.channel == "LASER_TO_BASE") {
+      ASSERT_GT(mount.decode(ev.data.data(), 0, static_cast<int>(ev.data.size())), 0);
+    }
+  }
+  EXPECT_EQ(laser, 0);
+  EXPECT_EQ(front, 4);
+  EXPECT_EQ(mount.trans[0], 0.25);
+  EXPECT_EQ(mount.trans[1], 0.05);
+  EXPECT_EQ(mount.trans[2], 0.2);
+  std::ofstream(robot) << "name: tilted\ncamera: {rpy_deg: [-90, 20, -90]}\n";
+  EXPECT_EQ(RunCommand(kSim + " --duration 0.3 --robot " + robot + " --log " + log, &out), 2);
+  EXPECT_NE(out.find("camera.rpy_deg must be [-90, 0, -90]"), std::string::npos) << out;
 }
 
 }  // namespace

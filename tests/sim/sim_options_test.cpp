@@ -28,12 +28,40 @@ TEST(SimOptionsTest, DefaultsAreThePaperScenario) {
 }
 
 TEST(SimOptionsTest, ConfigFilesMatchTheDefaults) {
-  const auto paper =
-      LoadYamlFile<SimOptions>(test::SourceDir() + "/config/sim_paper.yaml");
+  const auto paper = LoadYamlFile<SimOptions>(test::SourceDir() + "/config/sim_paper.yaml");
   EXPECT_EQ(SaveYamlString(paper), SaveYamlString(DefaultOptionsForWorld("paper")));
-  const auto corridor =
-      LoadYamlFile<SimOptions>(test::SourceDir() + "/config/sim_corridor.yaml");
+  const auto corridor = LoadYamlFile<SimOptions>(test::SourceDir() + "/config/sim_corridor.yaml");
   EXPECT_EQ(SaveYamlString(corridor), SaveYamlString(DefaultOptionsForWorld("corridor")));
+}
+
+// The mounting comes from the robot description; config/robot/sim.yaml is the built-in one.
+TEST(SimOptionsTest, MountingFromTheRobotDescription) {
+  const RobotDescription robot = LoadRobotDescription(test::SourceDir() + "/config/robot/sim.yaml");
+  SimOptions o;
+  ASSERT_TRUE(o.SetMounting(robot).ok());
+  EXPECT_EQ(SaveYamlString(o), SaveYamlString(SimOptions()));
+  const SimOptions defaults;
+  EXPECT_EQ(o.laser.x_m, defaults.laser.x_m);
+  EXPECT_EQ(o.laser.z_m, defaults.laser.z_m);
+  EXPECT_EQ(o.camera.y_m, defaults.camera.y_m);
+  EXPECT_EQ(o.camera.z_m, defaults.camera.z_m);
+
+  RobotDescription moved = robot;
+  moved.laser.xyz_m = {0.3, -0.1, 0.2};
+  ASSERT_TRUE(o.SetMounting(moved).ok());
+  EXPECT_EQ(o.laser.x_m, 0.3);
+  EXPECT_EQ(o.laser.y_m, -0.1);
+  EXPECT_EQ(o.laser.z_m, 0.2);
+
+  RobotDescription tilted = robot;  // the simulator cannot render a tilted camera
+  tilted.camera.rpy_deg = {-90, 10, -90};
+  const Status s = o.SetMounting(tilted);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("camera.rpy_deg must be [-90, 0, -90]"), std::string::npos)
+      << s.message();
+  RobotDescription high = robot;  // the scan plane must stay below the obstacles' tops
+  high.laser.xyz_m = {0, 0, 0.9};
+  EXPECT_FALSE(o.SetMounting(high).ok());
 }
 
 TEST(SimOptionsTest, BadValuesGiveErrorsNamingTheKey) {

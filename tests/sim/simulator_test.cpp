@@ -62,9 +62,11 @@ TEST(SimulatorTest, FramesCarryTheMessagesDueWithConsistentTimes) {
       EXPECT_EQ(f.step % 10, 0);
       EXPECT_TRUE(f.calibration->rectified);
       EXPECT_DOUBLE_EQ(f.calibration->baseline, 0.12);
-      // Optical z (column 2 of R_base_camera) is base x.
-      const Eigen::Isometry3d T = IsometryFromArrays(f.calibration->T_base_camera.trans,
-                                                     f.calibration->T_base_camera.quat);
+      // CAMERA_TO_BASE comes with it. Optical z (column 2 of R_base_camera) is base x.
+      ASSERT_TRUE(f.camera_to_base.has_value());
+      ASSERT_TRUE(f.laser_to_base.has_value());
+      const Eigen::Isometry3d T =
+          IsometryFromArrays(f.camera_to_base->trans, f.camera_to_base->quat);
       EXPECT_NEAR((T.linear().col(2) - Eigen::Vector3d::UnitX()).norm(), 0.0, 1e-12);
       EXPECT_NEAR((T.linear().col(0) + Eigen::Vector3d::UnitY()).norm(), 0.0, 1e-12);
       EXPECT_NEAR(T.translation().z(), 0.5, 1e-12);
@@ -77,6 +79,8 @@ TEST(SimulatorTest, FramesCarryTheMessagesDueWithConsistentTimes) {
   EXPECT_EQ(count["GROUND_TRUTH"], 21);
   EXPECT_EQ(count["STEREO"], 5);
   EXPECT_EQ(count["STEREO_CALIBRATION"], 3);
+  EXPECT_EQ(count["LASER_TO_BASE"], 3);
+  EXPECT_EQ(count["CAMERA_TO_BASE"], 3);
   EXPECT_FALSE(sim.Step(&f));
 }
 
@@ -88,15 +92,25 @@ TEST(SimulatorTest, MessagesAgreeWithTheWorldGeometry) {
   o.camera.enabled = false;
   Simulator sim(o);
   SimFrame f;
-  std::optional<fusionloc::stereo_calibration_t> calib;
+  // The camera is off (no STEREO, STEREO_CALIBRATION, CAMERA_TO_BASE): its messages are built
+  // by the functions that publish them.
+  {
+    Simulator probe(o);
+    ASSERT_TRUE(probe.Step(&f));
+    EXPECT_FALSE(f.calibration || f.camera_to_base || f.stereo);
+    EXPECT_TRUE(f.laser_to_base.has_value());
+  }
+  const std::optional<fusionloc::stereo_calibration_t> calib = sim.Calibration(0);
+  const bot_core::rigid_transform_t camera_to_base = sim.CameraToBase(0);
+  std::optional<bot_core::rigid_transform_t> laser_to_base;
   int checked_beams = 0, checked_pixels = 0;
   while (sim.Step(&f)) {
-    if (f.calibration) calib = f.calibration;
-    ASSERT_TRUE(calib.has_value());
+    if (f.laser_to_base) laser_to_base = f.laser_to_base;
+    ASSERT_TRUE(laser_to_base.has_value());
     const auto& gt = *f.ground_truth;
     const Eigen::Isometry3d T_world_base = IsometryFromArrays(gt.pos, gt.orientation);
     const Eigen::Isometry3d T_world_laser =
-        T_world_base * IsometryFromArrays(calib->T_base_laser.trans, calib->T_base_laser.quat);
+        T_world_base * IsometryFromArrays(laser_to_base->trans, laser_to_base->quat);
     const auto& scan = *f.laser;
     for (int i = 0; i < scan.nranges; ++i) {
       const double r = scan.ranges[i];
@@ -110,7 +124,7 @@ TEST(SimulatorTest, MessagesAgreeWithTheWorldGeometry) {
     // Pixels back-projected with the calibration and the rendered depth land on a surface
     // (an obstacle, or the floor at z = 0).
     const Eigen::Isometry3d T_world_camera =
-        T_world_base * IsometryFromArrays(calib->T_base_camera.trans, calib->T_base_camera.quat);
+        T_world_base * IsometryFromArrays(camera_to_base.trans, camera_to_base.quat);
     std::vector<float> depth;
     sim.camera().RenderDepth(sim.world(), f.T_world_base, CameraModel::kLeft, &depth);
     for (int v = 5; v < 480; v += 47) {
@@ -142,16 +156,19 @@ TEST(SimulatorTest, SameSeedGivesByteIdenticalLogs) {
   EXPECT_EQ(bytes_a, ReadBytes(dir.file("b.lcmlog")));
   EXPECT_NE(bytes_a, ReadBytes(dir.file("c.lcmlog")));
   EXPECT_EQ(a.frames, 21);
-  EXPECT_EQ(a.events, 21 * 3 + 5 + 3);
+  EXPECT_EQ(a.events, 21 * 3 + 5 + 3 * 3);
   EXPECT_FALSE(std::filesystem::exists(dir.file("a.lcmlog.partial")));
 
-  // The log reads back: calibration first, every message decodes, times never go back.
+  // The log reads back: the mountings and the calibration first, every message decodes, times
+  // never go back.
   LcmLogReader reader(dir.file("a.lcmlog"));
   LcmLogEvent ev;
-  ASSERT_TRUE(reader.Next(&ev));
-  EXPECT_EQ(ev.channel, "STEREO_CALIBRATION");
+  for (const char* first : {"LASER_TO_BASE", "CAMERA_TO_BASE", "STEREO_CALIBRATION"}) {
+    ASSERT_TRUE(reader.Next(&ev));
+    EXPECT_EQ(ev.channel, first);
+  }
   Utime last = 0;
-  int64_t n = 1;
+  int64_t n = 3;
   while (reader.Next(&ev)) {
     EXPECT_GE(ev.utime, last);
     last = ev.utime;

@@ -53,8 +53,12 @@ fusionloc::stereo_calibration_t MakeCalibration(const StereoCalibration& c, bool
   m.cy = c.cy;
   m.baseline = c.baseline;
   m.rectified = rectified;
-  fl::IsometryToArrays(c.T_base_camera, m.T_base_camera.trans, m.T_base_camera.quat);
-  fl::IsometryToArrays(Eigen::Isometry3d::Identity(), m.T_base_laser.trans, m.T_base_laser.quat);
+  return m;
+}
+
+bot_core::rigid_transform_t MakeCameraToBase(const StereoCalibration& c) {
+  bot_core::rigid_transform_t m{};
+  fl::IsometryToArrays(c.T_base_camera, m.trans, m.quat);
   return m;
 }
 
@@ -112,16 +116,18 @@ TEST(StereoVoLcm, FactorAndCalibrationConversions) {
   EXPECT_EQ(m.information[5], 0.5);   // row 0, col 5
   EXPECT_EQ(m.information[30], 0.5);  // row 5, col 0
   const StereoCalibration c = fl::test::stereo::TestCalibration();
-  const StereoCalibration back = CalibrationFromLcm(MakeCalibration(c, true));
+  const StereoCalibration back = CalibrationFromLcm(MakeCalibration(c, true), MakeCameraToBase(c));
   EXPECT_TRUE(back.T_base_camera.isApprox(c.T_base_camera, 1e-12));
   EXPECT_EQ(back.width, c.width);
   EXPECT_TRUE(back.Validate().ok());
-  EXPECT_FALSE(CalibrationFromLcm(MakeCalibration(c, false)).Validate().ok());
+  EXPECT_FALSE(
+      CalibrationFromLcm(MakeCalibration(c, false), MakeCameraToBase(c)).Validate().ok());
 }
 
-// Replays a log through the real process: an unrectified calibration is refused (status), the
-// valid one is used, a wrong-size frame and a repeated time stamp are dropped, and the
-// outputs appear on VO_POSE / VO_FACTORS / VO_POINTS.
+// Replays a log through the real process: a frame before the mounting (CAMERA_TO_BASE) waits,
+// an unrectified calibration is refused (status), the valid one is used, a wrong-size frame
+// and a repeated time stamp are dropped, and the outputs appear on VO_POSE / VO_FACTORS /
+// VO_POINTS.
 TEST(StereoVoLcm, ProcessReplaysALog) {
   const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
   if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
@@ -131,9 +137,11 @@ TEST(StereoVoLcm, ProcessReplaysALog) {
   {
     fl::LcmLogWriter log(dir.file("in.lcmlog"));
     const Utime t0 = 2000000000;
-    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, false), t0 - 2);
     cv::Mat l, r;
     fl::test::stereo::PlanePair(tex, calib, 5.0, 0.0, 0.0, &l, &r);
+    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, false), t0 - 5);
+    log.Write(fl::channels::kStereo, MakeStereo(t0 - 4, l, r), t0 - 4);  // no CAMERA_TO_BASE yet
+    log.Write(fl::channels::kCameraToBase, MakeCameraToBase(calib), t0 - 3);  // -> refused
     log.Write(fl::channels::kStereo, MakeStereo(t0 - 1, l, r), t0 - 1);  // no valid calibration
     log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0);
     for (int k = 0; k < 25; ++k) {
@@ -186,9 +194,9 @@ TEST(StereoVoLcm, ProcessReplaysALog) {
   EXPECT_EQ(counts[fl::channels::kVoPoints], counts[fl::channels::kVoFactors] + 1);
   EXPECT_NEAR(last_y, -0.05 * 24, 0.05);
   EXPECT_GE(counts["STATUS_FL_STEREO_VO"], 1);
-  // Dropped: the frame before the calibration, the repeated time stamp, the wrong size, and
-  // the unrectified calibration.
-  EXPECT_EQ(last_status.messages_dropped, 4);
+  // Dropped: the frame before the mounting, the frame after the unrectified calibration, the
+  // unrectified calibration, the repeated time stamp and the wrong size.
+  EXPECT_EQ(last_status.messages_dropped, 5);
   EXPECT_TRUE(saw_rectified_error) << "status should report the unrectified calibration";
 }
 

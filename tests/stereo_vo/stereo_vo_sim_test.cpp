@@ -32,7 +32,8 @@ TEST(StereoVoSim, ShortSimulatedSequenceDriftsLessThanOnePercent) {
   int frames = 0, tracked = 0, factors = 0;
   while (sim.Step(&frame)) {
     if (frame.calibration && !vo) {
-      vo = std::make_unique<StereoVo>(StereoVoOptions(), CalibrationFromLcm(*frame.calibration));
+      vo = std::make_unique<StereoVo>(
+          StereoVoOptions(), CalibrationFromLcm(*frame.calibration, *frame.camera_to_base));
     }
     if (!frame.stereo || !vo) continue;
     cv::Mat left, right;
@@ -92,7 +93,7 @@ TEST(StereoVoSim, EstimatesAnInjectedDisparityOffset) {
     int frames = 0;
     while (sim.Step(&frame)) {
       if (frame.calibration && !vo) {
-        const StereoCalibration cal = CalibrationFromLcm(*frame.calibration);
+        const StereoCalibration cal = CalibrationFromLcm(*frame.calibration, *frame.camera_to_base);
         vo = std::make_unique<StereoVo>(opts, cal);
         // new_right(u, v) = right(u + delta g(u)): features move to u - delta g.
         map_x.create(cal.height, cal.width, CV_32F);

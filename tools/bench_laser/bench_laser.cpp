@@ -54,6 +54,7 @@ struct LogData {
   std::vector<fl::rbpf::LaserScan> scans;
   fl::rbpf::OdometryBuffer odom{std::numeric_limits<int64_t>::max() / 4, 5 * fl::kUtimePerSecond};
   fl::eval::Trajectory ground_truth;
+  fl::Pose2 T_base_laser;  // LASER_TO_BASE (identity for the CARMEN importer's logs)
 };
 
 template <class Msg>
@@ -190,7 +191,7 @@ fl::eval::Trajectory Refit(const LogData& d, const fl::rbpf::RbpfSlamOptions& o,
     sigma.min_sigma_xy = noise->min_sigma_xy;
     sigma.min_sigma_rad = noise->min_sigma_theta;
   }
-  const fl::rbpf::RefitResult r = fl::rbpf::RefitReference(scans, o, sigma, ro);
+  const fl::rbpf::RefitResult r = fl::rbpf::RefitReference(scans, d.T_base_laser, o, sigma, ro);
   *icp_edges = r.icp_edges;
   fl::eval::Trajectory out;
   for (size_t k = 0; k < scans.size(); ++k)
@@ -211,17 +212,17 @@ fl::importers::CarmenNoiseModel ScaledNoise(double scale) {
 }
 
 // Laser scans, odometry and ground truth of a simulated world (camera off).
-LogData SimulateWorld(fl::sim::SimOptions so, fl::Pose2* T_base_laser) {
+LogData SimulateWorld(fl::sim::SimOptions so) {
   so.camera.enabled = false;
   fl::sim::Simulator sim(so);
   LogData d;
   fl::sim::SimFrame f;
-  bool have_cal = false;
+  bool have_mounting = false;
   while (sim.Step(&f)) {
-    if (f.calibration && !have_cal) {
-      have_cal = true;
-      *T_base_laser = fl::Pose2::FromIsometry3(fl::IsometryFromArrays(
-          f.calibration->T_base_laser.trans, f.calibration->T_base_laser.quat));
+    if (f.laser_to_base && !have_mounting) {  // as fl-rbpf-slam reads LASER_TO_BASE
+      have_mounting = true;
+      d.T_base_laser = fl::Pose2::FromIsometry3(
+          fl::IsometryFromArrays(f.laser_to_base->trans, f.laser_to_base->quat));
     }
     d.ground_truth.push_back({f.utime, f.T_world_base.ToIsometry3()});
     (void)d.odom.Add(f.utime, f.T_odom_base);
@@ -392,11 +393,7 @@ int main(int argc, char** argv) {
         run_options.seed = options.seed + 7 * static_cast<int>(seed - 1);
         LogData data;
         if (!in.sim_config.empty()) {
-          fl::Pose2 T_base_laser;
-          data = SimulateWorld(fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config), &T_base_laser);
-          run_options.base_laser_x = T_base_laser.x;
-          run_options.base_laser_y = T_base_laser.y;
-          run_options.base_laser_yaw = T_base_laser.theta;
+          data = SimulateWorld(fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config));
         } else {
           fl::importers::CarmenOptions co;
           co.seed = seed;
@@ -424,6 +421,8 @@ int main(int argc, char** argv) {
           throw std::runtime_error("fewer than 3 ground-truth poses");
 
         fl::rbpf::RbpfSlam slam(run_options);
+        if (const fl::Status s = slam.SetBaseLaser(data.T_base_laser); !s.ok())
+          throw std::runtime_error(s.message());
         std::vector<double> ms_processed, ms_all, chi2_seq, chi2_loop;
         double along_factor_m = 0.0, along_reference_m = 0.0;  // sequential factors
         int64_t skipped = 0;

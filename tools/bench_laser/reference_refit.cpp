@@ -45,15 +45,15 @@ Status RefitOptions::Validate() const {
   return Status::Ok();
 }
 
-RefitResult RefitReference(const std::vector<RefitScan>& scans, const RbpfSlamOptions& options,
-                           const RefitOdometrySigma& sigma, const RefitOptions& refit) {
+RefitResult RefitReference(const std::vector<RefitScan>& scans, const fl::Pose2& T_base_laser,
+                           const RbpfSlamOptions& options, const RefitOdometrySigma& sigma,
+                           const RefitOptions& refit) {
   if (const Status s = refit.Validate(); !s.ok()) throw std::invalid_argument(s.message());
   if (const Status s = options.Validate(); !s.ok()) throw std::invalid_argument(s.message());
   if (scans.size() < 2) {
     throw std::invalid_argument("RefitReference: needs at least 2 scans, got " +
                                 std::to_string(scans.size()));
   }
-  const fl::Pose2 T_base_laser(options.base_laser_x, options.base_laser_y, options.base_laser_yaw);
   const int n = static_cast<int>(scans.size());
   std::vector<std::vector<Eigen::Vector2d>> points(n);
   std::vector<std::vector<PointNormal>> normals(n);

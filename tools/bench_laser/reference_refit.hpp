@@ -68,10 +68,12 @@ struct RefitResult {
   double final_cost = 0.0;    // ... at the optimum
 };
 
-// Scans must be in time order with the same beam geometry (beams over icp's grid max range,
-// NaN, inf and <= 0 are ignored). Throws std::invalid_argument for bad options or fewer than 2
-// scans.
-RefitResult RefitReference(const std::vector<RefitScan>& scans, const RbpfSlamOptions& options,
-                           const RefitOdometrySigma& odometry_sigma, const RefitOptions& refit);
+// T_base_laser is the laser's mounting (the robot description's; identity for the CARMEN
+// importer's logs, whose LASER is in the laser frame). Scans must be in time order with the same
+// beam geometry (beams over icp's grid max range, NaN, inf and <= 0 are ignored). Throws
+// std::invalid_argument for bad options or fewer than 2 scans.
+RefitResult RefitReference(const std::vector<RefitScan>& scans, const fl::Pose2& T_base_laser,
+                           const RbpfSlamOptions& options, const RefitOdometrySigma& odometry_sigma,
+                           const RefitOptions& refit);
 
 }  // namespace fl::rbpf

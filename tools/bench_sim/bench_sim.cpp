@@ -4,8 +4,8 @@
 //
 // The data path is the simulator's messages (fl::sim::Simulator::Step), decoded as the
 // processes do; the estimators run with the built-in default options, the same as
-// `./fusionloc bench laser` and `./fusionloc bench stereo` (the laser mounting is taken from
-// the simulator's STEREO_CALIBRATION.T_base_laser, as fl-rbpf-slam does). The fusion gets
+// `./fusionloc bench laser` and `./fusionloc bench stereo` (the mountings are taken from
+// the simulator's LASER_TO_BASE and CAMERA_TO_BASE, as the processes do). The fusion gets
 // exactly what fl-fusion gets on LCM: the RBPF pose of every scan (nodes), the RBPF keyframe
 // factors and the VO keyframe factors; it is updated after every scan (the timed "incremental
 // update") and fully solved when it asks (loop closure, period) and at the end.
@@ -87,15 +87,16 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
   while (sim.Step(&f)) {
     progress.Update(++step);
     if (f.calibration && !vo) {
-      const fl::vo::StereoCalibration cal = fl::vo::CalibrationFromLcm(*f.calibration);
+      if (!f.camera_to_base) throw std::runtime_error("simulator: no CAMERA_TO_BASE");
+      const fl::vo::StereoCalibration cal =
+          fl::vo::CalibrationFromLcm(*f.calibration, *f.camera_to_base);
       vo = std::make_unique<fl::vo::StereoVo>(vo_options, cal);
-      fl::rbpf::RbpfSlamOptions ro = rbpf_options_in;
-      const fl::Pose2 T_base_laser = fl::Pose2::FromIsometry3(fl::IsometryFromArrays(
-          f.calibration->T_base_laser.trans, f.calibration->T_base_laser.quat));
-      ro.base_laser_x = T_base_laser.x;
-      ro.base_laser_y = T_base_laser.y;
-      ro.base_laser_yaw = T_base_laser.theta;
-      rbpf.emplace(ro);
+      rbpf.emplace(rbpf_options_in);
+      if (f.laser_to_base) {  // as fl-rbpf-slam reads LASER_TO_BASE
+        const fl::Status s = rbpf->SetBaseLaser(fl::Pose2::FromIsometry3(
+            fl::IsometryFromArrays(f.laser_to_base->trans, f.laser_to_base->quat)));
+        if (!s.ok()) throw std::runtime_error(s.message());
+      }
     }
     out.truth.push_back(Stamp(f.utime, f.T_world_base));
     truth_by_time[f.utime] = f.T_world_base;

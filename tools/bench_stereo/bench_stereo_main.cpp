@@ -14,8 +14,10 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <sstream>
 
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
@@ -110,6 +112,7 @@ RunOutput RunFolder(const std::string& folder, const fl::vo::StereoVoOptions& op
   fl::LcmLogReader reader(log_path);
   fl::LcmLogEvent ev;
   std::unique_ptr<fl::vo::StereoVo> vo;
+  std::optional<bot_core::rigid_transform_t> camera_to_base;
   fl::eval::Trajectory est, ref;
   std::vector<double> ms, cpu_ms;
   int frames = 0, lost = 0, rejected = 0, keyframes = 0, factors = 0;
@@ -118,10 +121,17 @@ RunOutput RunFolder(const std::string& folder, const fl::vo::StereoVoOptions& op
                                conv.messages.count("STEREO") ? conv.messages.at("STEREO") : 0);
   while (reader.Next(&ev)) {
     const int size = static_cast<int>(ev.data.size());
-    if (ev.channel == fl::channels::kStereoCalibration && !vo) {
+    if (ev.channel == fl::channels::kCameraToBase && !camera_to_base) {
+      bot_core::rigid_transform_t msg{};
+      if (msg.decode(ev.data.data(), 0, size) != size) throw std::runtime_error("bad mounting");
+      camera_to_base = msg;
+    } else if (ev.channel == fl::channels::kStereoCalibration && !vo) {
       fusionloc::stereo_calibration_t msg;
       if (msg.decode(ev.data.data(), 0, size) != size) throw std::runtime_error("bad calibration");
-      vo = std::make_unique<fl::vo::StereoVo>(options, fl::vo::CalibrationFromLcm(msg));
+      if (!camera_to_base)
+        throw std::runtime_error(log_path + ": STEREO_CALIBRATION before CAMERA_TO_BASE");
+      vo = std::make_unique<fl::vo::StereoVo>(options,
+                                              fl::vo::CalibrationFromLcm(msg, *camera_to_base));
     } else if (ev.channel == fl::channels::kGroundTruth) {
       bot_core::pose_t msg{};
       if (msg.decode(ev.data.data(), 0, size) != size) throw std::runtime_error("bad pose");

@@ -109,7 +109,8 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
       {"rbpf_slam", "${BIN}/fl-rbpf-slam --lcm-url=${URL} --config ${CONFIG}/rbpf_slam.yaml"},
       {"stereo_vo", "${BIN}/fl-stereo-vo --lcm-url=${URL} --config ${CONFIG}/stereo_vo.yaml"},
       {"fusion", "${BIN}/fl-fusion --lcm-url=${URL} --config ${CONFIG}/fusion.yaml"},
-      {"sim", "${BIN}/fl-sim --lcm-url=${URL} --config ${SIM} --rate 1"}};
+      {"sim",
+       "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${SIM} --rate 1"}};
   for (int i = 0; i < 4; ++i) {
     fl::procman::CommandOrder c;
     c.spec.sheriff_id = i + 1;

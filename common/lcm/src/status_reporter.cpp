@@ -38,14 +38,19 @@ void StatusReporter::SetTiming(const std::string& key, double ms) {
 }
 
 void StatusReporter::SetState(int level, const std::string& message) {
+  if (level == fusionloc::status_t::LEVEL_ERROR && level_ != level) error_pending_ = true;
   level_ = level;
   message_ = message;
 }
 
 void StatusReporter::Tick(bool force) {
   const Utime now = lcm_->Now();
-  if (!force && now >= last_publish_ && UtimeToSeconds(now - last_publish_) < period_s_) return;
+  if (!force && !error_pending_ && now >= last_publish_ &&
+      UtimeToSeconds(now - last_publish_) < period_s_) {
+    return;
+  }
   last_publish_ = now;
+  error_pending_ = false;
   fusionloc::status_t st;
   st.utime = now;
   st.process = process_;

@@ -1,5 +1,6 @@
-// fl-sim: the simulated robot. Publishes LASER, ODOMETRY, STEREO, STEREO_CALIBRATION and
-// GROUND_TRUTH live over LCM, or writes them to an LCM log faster than real time.
+// fl-sim: the simulated robot. Publishes LASER, ODOMETRY, STEREO, STEREO_CALIBRATION, the
+// mountings (LASER_TO_BASE, CAMERA_TO_BASE) and GROUND_TRUTH live over LCM, or writes them to an
+// LCM log faster than real time.
 #include <chrono>
 #include <cstdio>
 #include <exception>
@@ -9,6 +10,7 @@
 #include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/common/log.hpp"
 #include "fusionloc/common/number_format.hpp"
+#include "fusionloc/common/robot_description.hpp"
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/common/status_reporter.hpp"
 #include "fusionloc/common/yaml_options.hpp"
@@ -67,12 +69,14 @@ int RunLive(const fl::sim::SimOptions& options, const fl::LcmProcess& process, d
   return 0;
 }
 
-int RunLog(const fl::sim::SimOptions& options, const std::string& path) {
+int RunLog(const fl::sim::SimOptions& options, const std::string& path,
+           const fl::ChannelMap& channels) {
   fl::InstallShutdownHandlers();
   const auto start = std::chrono::steady_clock::now();
   auto last = start;
-  const fl::sim::LogStats stats =
-      fl::sim::WriteLog(options, path, [&](int64_t done, int64_t total) {
+  const fl::sim::LogStats stats = fl::sim::WriteLog(
+      options, path,
+      [&](int64_t done, int64_t total) {
         // WriteLog deletes the partial output when this throws.
         if (fl::ShutdownRequested()) throw std::runtime_error("interrupted; no log written");
         const auto now = std::chrono::steady_clock::now();
@@ -83,7 +87,8 @@ int RunLog(const fl::sim::SimOptions& options, const std::string& path) {
         FL_LOG(INFO) << "step " << done << "/" << total << " ("
                      << (100 * done / std::max<int64_t>(total, 1)) << "%), eta "
                      << static_cast<int>(eta + 0.5) << " s";
-      });
+      },
+      channels);
   const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   FL_LOG(INFO) << "wrote " << path << ": " << stats.frames << " steps, " << stats.events
@@ -103,7 +108,7 @@ int main(int argc, char** argv) {
   fl::CommandLine& cli = program.cli();
   fl::sim::SimOptions options;
   program.AddOptions(&options, "config/sim_paper.yaml; the flags below override it");
-  std::string world, log_path, top_view;
+  std::string world, log_path, top_view, robot_path;
   int64_t seed = -1;
   double duration = -1.0, rate = 1.0;
   double snapshot_time = -1.0;
@@ -113,6 +118,9 @@ int main(int argc, char** argv) {
               "random seed for the world layout and all noise (>= 0; -1 = the config's, else 1)");
   cli.AddFlag("duration", &duration,
               "simulated seconds (-1 = the config's, else 100 paper, 240 corridor)");
+  cli.AddFlag("robot", &robot_path,
+              "robot description (docs/ROBOT.md) for the sensors' mounting; default: the "
+              "simulated robot's, the same as config/robot/sim.yaml");
   cli.AddFlag("log", &log_path, "write an LCM log to this file instead of publishing live");
   cli.AddFlag("rate", &rate,
               "live pace: 1 = real time, 2 = twice as fast, 0 = as fast as possible");
@@ -125,7 +133,9 @@ int main(int argc, char** argv) {
   cli.AddFlag("snapshot-time", &snapshot_time, "simulated time of --snapshot [s]");
   fl::LcmProcess process(
       &program, {},
-      {{"STEREO_CALIBRATION", "fusionloc.stereo_calibration_t", "first and every 1 s"},
+      {{"LASER_TO_BASE", "bot_core.rigid_transform_t", "T_base_laser, first and every 1 s"},
+       {"CAMERA_TO_BASE", "bot_core.rigid_transform_t", "T_base_camera, first and every 1 s"},
+       {"STEREO_CALIBRATION", "fusionloc.stereo_calibration_t", "first and every 1 s"},
        {"GROUND_TRUTH", "bot_core.pose_t", "true T_world_base, 10 Hz"},
        {"ODOMETRY", "fusionloc.wheel_odometry_t", "10 Hz"},
        {"LASER", "bot_core.planar_lidar_t", "10 Hz, range 0 = no return"},
@@ -150,6 +160,15 @@ int main(int argc, char** argv) {
     }
     if (seed != -1) options.seed = seed;
     if (duration != -1.0) options.duration_s = duration;
+    if (!robot_path.empty()) {
+      fl::Status mounted = fl::Status::Ok();
+      try {
+        mounted = options.SetMounting(fl::LoadRobotDescription(robot_path));
+      } catch (const fl::ConfigError& e) {
+        return e.what();
+      }
+      if (!mounted.ok()) return robot_path + ": " + mounted.message();
+    }
     if (rate < 0.0) {
       return "--rate " + fl::FormatDouble(rate) +
              " is negative; use 1 for real time or 0 for as fast as possible";
@@ -169,7 +188,7 @@ int main(int argc, char** argv) {
       FL_LOG(INFO) << "wrote " << snapshot << "_left.png and _right.png";
       return 0;
     }
-    if (!log_path.empty()) return RunLog(options, log_path);
+    if (!log_path.empty()) return RunLog(options, log_path, process.channels());
     return RunLive(options, process, rate);
   });
 }

@@ -121,6 +121,27 @@ Status CameraOptions::Validate() const {
   return c.status();
 }
 
+Status SimOptions::SetMounting(const RobotDescription& robot) {
+  const std::vector<double> level{0.0, 0.0, 0.0}, optical{-90.0, 0.0, -90.0};
+  if (robot.laser.rpy_deg != level) {
+    return Status::Error("robot '" + robot.name +
+                         "': laser.rpy_deg must be [0, 0, 0] for the simulator (it models a "
+                         "level laser whose 0 rad beam points along base x)");
+  }
+  if (robot.camera.rpy_deg != optical) {
+    return Status::Error("robot '" + robot.name +
+                         "': camera.rpy_deg must be [-90, 0, -90] for the simulator (it renders "
+                         "a level camera looking along base x)");
+  }
+  laser.x_m = robot.laser.xyz_m.at(0);
+  laser.y_m = robot.laser.xyz_m.at(1);
+  laser.z_m = robot.laser.xyz_m.at(2);
+  camera.x_m = robot.camera.xyz_m.at(0);
+  camera.y_m = robot.camera.xyz_m.at(1);
+  camera.z_m = robot.camera.xyz_m.at(2);
+  return Validate();
+}
+
 Status SimOptions::Validate() const {
   for (const Status& s : {world.Validate(), robot.Validate(), odometry.Validate(),
                           laser.Validate(), camera.Validate()}) {

@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
 
 namespace fl::sim {
 
@@ -16,7 +17,8 @@ RouteFollower::RouteFollower(std::vector<Eigen::Vector2d> route, const RobotOpti
   if (route_.size() < 2) throw std::invalid_argument("a route needs at least two points");
   cumulative_.push_back(0.0);
   for (size_t i = 0; i < route_.size(); ++i) {
-    cumulative_.push_back(cumulative_.back() + (route_[(i + 1) % route_.size()] - route_[i]).norm());
+    cumulative_.push_back(cumulative_.back() +
+                          (route_[(i + 1) % route_.size()] - route_[i]).norm());
   }
 }
 
@@ -24,8 +26,8 @@ Eigen::Vector2d RouteFollower::PointAt(double s) const {
   const double loop = cumulative_.back();
   s = std::fmod(s, loop);
   if (s < 0) s += loop;
-  const size_t i = static_cast<size_t>(
-      std::upper_bound(cumulative_.begin(), cumulative_.end(), s) - cumulative_.begin() - 1);
+  const size_t i = static_cast<size_t>(std::upper_bound(cumulative_.begin(), cumulative_.end(), s) -
+                                       cumulative_.begin() - 1);
   const size_t seg = std::min(i, route_.size() - 1);
   const double len = cumulative_[seg + 1] - cumulative_[seg];
   const double u = len > 0 ? (s - cumulative_[seg]) / len : 0.0;
@@ -131,18 +133,21 @@ fusionloc::stereo_calibration_t Simulator::Calibration(Utime utime) const {
   m.cy = c.cy;
   m.baseline = c.baseline_m;
   m.rectified = true;
-  // Optical axes in the base frame: x_cam = -y_base, y_cam = -z_base, z_cam = +x_base.
-  Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();
-  T_base_camera.linear() << 0, 0, 1, -1, 0, 0, 0, -1, 0;
-  T_base_camera.translation() = Eigen::Vector3d(c.x_m, c.y_m, c.z_m);
-  IsometryToArrays(T_base_camera, m.T_base_camera.trans, m.T_base_camera.quat);
-  m.T_base_camera.utime = 0;  // static
-  Eigen::Isometry3d T_base_laser = Eigen::Isometry3d::Identity();
-  T_base_laser.translation() =
-      Eigen::Vector3d(options_.laser.x_m, options_.laser.y_m, options_.laser.z_m);
-  IsometryToArrays(T_base_laser, m.T_base_laser.trans, m.T_base_laser.quat);
-  m.T_base_laser.utime = 0;
   return m;
+}
+
+bot_core::rigid_transform_t Simulator::LaserToBase(Utime utime) const {
+  Mount laser;  // level, 0 rad beam along base x
+  laser.xyz_m = {options_.laser.x_m, options_.laser.y_m, options_.laser.z_m};
+  return TransformToLcm(laser.T_base_sensor(), utime);
+}
+
+bot_core::rigid_transform_t Simulator::CameraToBase(Utime utime) const {
+  // Optical axes in the base frame: x_cam = -y_base, y_cam = -z_base, z_cam = +x_base.
+  Mount camera;
+  camera.xyz_m = {options_.camera.x_m, options_.camera.y_m, options_.camera.z_m};
+  camera.rpy_deg = {-90.0, 0.0, -90.0};
+  return TransformToLcm(camera.T_base_sensor(), utime);
 }
 
 bool Simulator::Step(SimFrame* out) {
@@ -162,7 +167,13 @@ bool Simulator::Step(SimFrame* out) {
   f.v = v_;
   f.omega = omega_;
 
-  if (k % calibration_period_ == 0) f.calibration = Calibration(f.utime);
+  if (k % calibration_period_ == 0) {
+    if (options_.laser.enabled) f.laser_to_base = LaserToBase(f.utime);
+    if (options_.camera.enabled) {
+      f.camera_to_base = CameraToBase(f.utime);
+      f.calibration = Calibration(f.utime);
+    }
+  }
 
   bot_core::pose_t gt;
   gt.utime = f.utime;
@@ -190,9 +201,9 @@ bool Simulator::Step(SimFrame* out) {
     const double dist = std::hypot(inc.x, inc.y);
     const double e_fwd = odometry_rng_.Normal(n.trans_sigma_m_per_sqrt_m * std::sqrt(dist));
     const double e_lat = odometry_rng_.Normal(n.lateral_sigma_m_per_sqrt_m * std::sqrt(dist));
-    const double yaw_var = n.yaw_sigma_rad_per_sqrt_rad * n.yaw_sigma_rad_per_sqrt_rad *
-                               std::fabs(inc.theta) +
-                           n.yaw_sigma_rad_per_sqrt_m * n.yaw_sigma_rad_per_sqrt_m * dist;
+    const double yaw_var =
+        n.yaw_sigma_rad_per_sqrt_rad * n.yaw_sigma_rad_per_sqrt_rad * std::fabs(inc.theta) +
+        n.yaw_sigma_rad_per_sqrt_m * n.yaw_sigma_rad_per_sqrt_m * dist;
     const double e_yaw = odometry_rng_.Normal(std::sqrt(yaw_var));
     const Pose2 noisy(inc.x + e_fwd, inc.y + e_lat, inc.theta + e_yaw);
     odom_pose_ = odom_pose_ * noisy;
@@ -257,7 +268,8 @@ bool Simulator::Step(SimFrame* out) {
 // Log writing
 
 LogStats WriteLog(const SimOptions& options, const std::string& path,
-                  const std::function<void(int64_t, int64_t)>& progress) {
+                  const std::function<void(int64_t, int64_t)>& progress,
+                  const ChannelMap& channels) {
   Simulator sim(options);  // validates before any file is created
   LcmLogWriter writer(path);
   LogStats stats;
@@ -265,7 +277,7 @@ LogStats WriteLog(const SimOptions& options, const std::string& path,
     SimFrame frame;
     while (sim.Step(&frame)) {
       VisitMessages(frame, [&](const char* channel, const auto& msg) {
-        writer.Write(channel, msg, frame.utime);
+        writer.Write(channels(channel), msg, frame.utime);
         ++stats.events;
         stats.bytes += msg.getEncodedSize();
       });

@@ -199,10 +199,6 @@ Status RbpfSlamOptions::Validate() const {
   FL_RETURN_IF_ERROR(NonNegative("angular_update", angular_update));
   FL_RETURN_IF_ERROR(NonNegative("max_turn_rate", max_turn_rate));
   FL_RETURN_IF_ERROR(NonNegative("turn_skip_max_gap", turn_skip_max_gap));
-  if (!std::isfinite(base_laser_x) || !std::isfinite(base_laser_y) ||
-      !std::isfinite(base_laser_yaw)) {
-    return Status::Error("base_laser_x/y/yaw must be finite");
-  }
   FL_RETURN_IF_ERROR(grid.Validate());
   FL_RETURN_IF_ERROR(motion.Validate());
   FL_RETURN_IF_ERROR(matcher.Validate());

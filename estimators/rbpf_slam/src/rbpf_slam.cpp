@@ -35,7 +35,6 @@ bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
 
 RbpfSlam::RbpfSlam(const RbpfSlamOptions& options)
     : opt_(options),
-      T_base_laser_(options.base_laser_x, options.base_laser_y, options.base_laser_yaw),
       rng_(static_cast<uint32_t>(options.seed)),
       rebuild_map_(options.grid) {
   const Status s = options.Validate();

@@ -73,8 +73,8 @@ std::vector<ChannelSpec> FusionNode::Inputs() {
           {channels::kVoFactors, "fusionloc.relative_pose_factor_t", "visual keyframe factors"},
           {channels::kOdometry, "fusionloc.wheel_odometry_t", "wheel odometry between nodes"},
           {channels::kVoPoints, "fusionloc.point_cloud_t", "keyframe points for the 3D map"},
-          {channels::kStereoCalibration, "fusionloc.stereo_calibration_t",
-           "T_base_camera for the keyframe points"}};
+          {channels::kCameraToBase, "bot_core.rigid_transform_t",
+           "T_base_camera (robot description) for the keyframe points"}};
 }
 
 std::vector<ChannelSpec> FusionNode::Outputs() {
@@ -97,7 +97,7 @@ FusionNode::FusionNode(const FusionProcessConfig& config, const FusionNodeOption
       ch_rbpf_pose_(channels(channels::kRbpfPose)),
       ch_odometry_(channels(channels::kOdometry)),
       ch_points_(channels(channels::kVoPoints)),
-      ch_calib_(channels(channels::kStereoCalibration)),
+      ch_camera_to_base_(channels(channels::kCameraToBase)),
       ch_pose_(channels(channels::kFusedPose)),
       ch_trajectory_(channels(channels::kFusedTrajectory)),
       ch_map_(channels(channels::kFusedMap)),
@@ -117,10 +117,10 @@ FusionNode::FusionNode(const FusionProcessConfig& config, const FusionNodeOption
       [this](const fusionloc::wheel_odometry_t& m, const std::string&) { OnOdometry(m); });
   lcm_->Subscribe<fusionloc::point_cloud_t>(
       ch_points_, [this](const fusionloc::point_cloud_t& m, const std::string&) { OnPoints(m); });
-  lcm_->Subscribe<fusionloc::stereo_calibration_t>(
-      ch_calib_, [this](const fusionloc::stereo_calibration_t& m, const std::string&) {
-        T_base_camera_ = IsometryFromArrays(m.T_base_camera.trans, m.T_base_camera.quat);
-        have_calibration_ = true;
+  lcm_->Subscribe<bot_core::rigid_transform_t>(
+      ch_camera_to_base_, [this](const bot_core::rigid_transform_t& m, const std::string&) {
+        T_base_camera_ = IsometryFromArrays(m.trans, m.quat);
+        have_camera_to_base_ = true;
       });
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_rbpf_pose_);
   if (!async_ && lcm->replaying()) FL_LOG(INFO) << "replaying a log: full solves inline";
@@ -227,8 +227,8 @@ void FusionNode::OnPoints(const fusionloc::point_cloud_t& m) {
   }
   Eigen::Isometry3f T_base_frame = Eigen::Isometry3f::Identity();
   if (m.frame == "camera") {
-    if (!have_calibration_) {
-      status_.CountDropped(ch_points_ + " in the camera frame before any " + ch_calib_ +
+    if (!have_camera_to_base_) {
+      status_.CountDropped(ch_points_ + " in the camera frame before any " + ch_camera_to_base_ +
                            " (T_base_camera unknown); keyframe dropped");
       return;
     }

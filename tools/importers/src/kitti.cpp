@@ -17,6 +17,7 @@
 
 #include "bot_core/images_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
@@ -553,12 +554,13 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
   cal.cy = c.cy;
   cal.baseline = c.baseline;
   cal.rectified = true;
+  // The mounting, from the drive's own calibration: the base frame is cam0's, with base axes.
+  bot_core::rigid_transform_t camera_to_base{};
   {
     Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();
     T_base_camera.linear() = R_bc;
     T_base_camera.translation() = R_bc * c.left_center_in_cam0;
-    IsometryToArrays(T_base_camera, cal.T_base_camera.trans, cal.T_base_camera.quat);
-    IsometryToArrays(Eigen::Isometry3d::Identity(), cal.T_base_laser.trans, cal.T_base_laser.quat);
+    IsometryToArrays(T_base_camera, camera_to_base.trans, camera_to_base.quat);
   }
 
   int64_t backwards = 0;
@@ -594,6 +596,8 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
       const Utime t = seq.utimes[i];
       if (!cal_written || (cal_period > 0 && t - last_cal >= cal_period)) {
         cal.utime = t;
+        camera_to_base.utime = t;
+        write(channels::kCameraToBase, camera_to_base, t);
         write(channels::kStereoCalibration, cal, t);
         last_cal = t;
         cal_written = true;

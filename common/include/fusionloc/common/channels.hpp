@@ -9,6 +9,12 @@ constexpr const char* kLaser = "LASER";                           // bot_core.pl
 constexpr const char* kOdometry = "ODOMETRY";                     // fusionloc.wheel_odometry_t
 constexpr const char* kStereo = "STEREO";                         // bot_core.images_t (LEFT, RIGHT)
 constexpr const char* kStereoCalibration = "STEREO_CALIBRATION";  // fusionloc.stereo_calibration_t
+// The robot description (config/robot/<robot>.yaml, docs/ROBOT.md): sensor mountings as
+// bot_core.rigid_transform_t T_base_sensor (p_base = R p_sensor + t), published by whatever
+// describes the robot (fl-sim, the importers, fl-robot-description) first and every 1 s.
+// libbot2's naming: <FROM>_TO_<TO>.
+constexpr const char* kLaserToBase = "LASER_TO_BASE";    // T_base_laser
+constexpr const char* kCameraToBase = "CAMERA_TO_BASE";  // T_base_camera (left, optical frame)
 // Reference pose of the base in the world frame (simulator truth, KITTI OXTS poses, CARMEN
 // corrected poses): bot_core.pose_t. Never read by an estimator.
 constexpr const char* kGroundTruth = "GROUND_TRUTH";

@@ -6,7 +6,7 @@
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/status_t.hpp"
-#include "fusionloc/stereo_calibration_t.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
 namespace fl::rbpf {
@@ -170,8 +170,9 @@ std::vector<ChannelSpec> RbpfSlamNode::Inputs() {
   return {{channels::kLaser, "bot_core.planar_lidar_t", "laser scans (required)"},
           {channels::kOdometry, "fusionloc.wheel_odometry_t",
            "wheel odometry, interpolated at each scan (required unless --no-odometry)"},
-          {channels::kStereoCalibration, "fusionloc.stereo_calibration_t",
-           "T_base_laser, read before the first scan (identity if absent)"}};
+          {channels::kLaserToBase, "bot_core.rigid_transform_t",
+           "T_base_laser, the robot description's mounting, read before the first scan "
+           "(identity if absent, with a warning)"}};
 }
 
 std::vector<ChannelSpec> RbpfSlamNode::Outputs() {
@@ -190,7 +191,7 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
       lcm_(lcm),
       ch_laser_(channels(channels::kLaser)),
       ch_odometry_(channels(channels::kOdometry)),
-      ch_calibration_(channels(channels::kStereoCalibration)),
+      ch_laser_to_base_(channels(channels::kLaserToBase)),
       ch_pose_(channels(channels::kRbpfPose)),
       ch_factors_(channels(channels::kRbpfFactors)),
       ch_trajectory_(channels(channels::kRbpfTrajectory)),
@@ -198,10 +199,9 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
       slam_(options),
       sync_(node_options.merge_latency_s, !node_options.no_odometry),
       status_(lcm, kProgram) {
-  lcm_->Subscribe<fusionloc::stereo_calibration_t>(
-      ch_calibration_, [this](const fusionloc::stereo_calibration_t& m, const std::string&) {
-        OnCalibration(
-            Pose2::FromIsometry3(IsometryFromArrays(m.T_base_laser.trans, m.T_base_laser.quat)));
+  lcm_->Subscribe<bot_core::rigid_transform_t>(
+      ch_laser_to_base_, [this](const bot_core::rigid_transform_t& m, const std::string&) {
+        OnLaserToBase(Pose2::FromIsometry3(IsometryFromArrays(m.trans, m.quat)));
       });
   lcm_->Subscribe<bot_core::planar_lidar_t>(
       ch_laser_, [this](const bot_core::planar_lidar_t& m, const std::string&) { OnLaser(m); });
@@ -220,24 +220,24 @@ std::vector<std::string> RbpfSlamNode::RequiredInputs() const {
   return {ch_laser_, ch_odometry_};
 }
 
-void RbpfSlamNode::OnCalibration(const Pose2& T) {
+void RbpfSlamNode::OnLaserToBase(const Pose2& T) {
   if (started_) {
-    if (!have_calibration_) {
-      warn_.Warn(ch_calibration_ +
+    if (!have_laser_to_base_) {
+      warn_.Warn(ch_laser_to_base_ +
                  " arrived after the first scan; T_base_laser ignored (identity used)");
     }
     return;
   }
   const Status s = slam_.SetBaseLaser(T);
   if (!s.ok()) {
-    warn_.Warn(ch_calibration_ + ": " + s.message());
+    warn_.Warn(ch_laser_to_base_ + ": " + s.message());
     return;
   }
-  if (!have_calibration_) {
-    FL_LOG(INFO) << "T_base_laser from " << ch_calibration_ << ": x " << T.x << " y " << T.y
+  if (!have_laser_to_base_) {
+    FL_LOG(INFO) << "T_base_laser from " << ch_laser_to_base_ << ": x " << T.x << " y " << T.y
                  << " yaw " << T.theta;
   }
-  have_calibration_ = true;
+  have_laser_to_base_ = true;
 }
 
 void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
@@ -280,6 +280,12 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
     status_.CountDropped("LASER: " + st.message());
     warn_.Warn(st.message());
     return;
+  }
+  if (!started_ && !have_laser_to_base_) {
+    warn_.Warn("no " + ch_laser_to_base_ +
+               " before the first scan: the laser is taken to be at the base origin (identity "
+               "T_base_laser). Publish the robot description (fl-robot-description --robot "
+               "config/robot/<robot>.yaml) if it is mounted elsewhere");
   }
   started_ = true;
   last_utime_ = scan.utime;

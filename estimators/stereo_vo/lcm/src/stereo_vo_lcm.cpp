@@ -71,7 +71,8 @@ fl::Status StereoImagesToGray(const bot_core::images_t& images, cv::Mat* left, c
   return fl::Status::Ok();
 }
 
-StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg) {
+StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg,
+                                     const bot_core::rigid_transform_t& camera_to_base) {
   StereoCalibration c;
   c.fx = msg.fx;
   c.fy = msg.fy;
@@ -81,7 +82,7 @@ StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg)
   c.width = msg.width;
   c.height = msg.height;
   c.rectified = msg.rectified;
-  c.T_base_camera = fl::IsometryFromArrays(msg.T_base_camera.trans, msg.T_base_camera.quat);
+  c.T_base_camera = fl::IsometryFromArrays(camera_to_base.trans, camera_to_base.quat);
   return c;
 }
 
@@ -133,7 +134,9 @@ std::vector<ChannelSpec> StereoVoNode::Inputs() {
   return {{channels::kStereo, "bot_core.images_t",
            "rectified LEFT/RIGHT pair, 8-bit GRAY, RGB or BGR (required)"},
           {channels::kStereoCalibration, "fusionloc.stereo_calibration_t",
-           "intrinsics, baseline, T_base_camera (required before the first frame)"}};
+           "intrinsics and baseline (required before the first frame)"},
+          {channels::kCameraToBase, "bot_core.rigid_transform_t",
+           "T_base_camera, the robot description's mounting (required before the first frame)"}};
 }
 
 std::vector<ChannelSpec> StereoVoNode::Outputs() {
@@ -149,6 +152,7 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
       lcm_(lcm),
       ch_stereo_(channels(channels::kStereo)),
       ch_calib_(channels(channels::kStereoCalibration)),
+      ch_camera_to_base_(channels(channels::kCameraToBase)),
       ch_pose_(channels(channels::kVoPose)),
       ch_factors_(channels(channels::kVoFactors)),
       ch_points_(channels(channels::kVoPoints)),
@@ -157,6 +161,9 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
   lcm_->Subscribe<fusionloc::stereo_calibration_t>(
       ch_calib_,
       [this](const fusionloc::stereo_calibration_t& m, const std::string&) { OnCalibration(m); });
+  lcm_->Subscribe<bot_core::rigid_transform_t>(
+      ch_camera_to_base_,
+      [this](const bot_core::rigid_transform_t& m, const std::string&) { OnCameraToBase(m); });
   lcm_->Subscribe<bot_core::images_t>(
       ch_stereo_, [this](const bot_core::images_t& m, const std::string&) { OnStereo(m); });
 }
@@ -165,7 +172,23 @@ StereoVoNode::~StereoVoNode() = default;
 
 void StereoVoNode::OnCalibration(const fusionloc::stereo_calibration_t& msg) {
   status_.CountIn();
-  const StereoCalibration calib = CalibrationFromLcm(msg);
+  intrinsics_ = msg;
+  StartOrRestart();
+}
+
+void StereoVoNode::OnCameraToBase(const bot_core::rigid_transform_t& msg) {
+  status_.CountIn();
+  camera_to_base_ = msg;
+  StartOrRestart();
+}
+
+void StereoVoNode::StartOrRestart() {
+  if (!intrinsics_ || !camera_to_base_) {
+    status_.SetState(fusionloc::status_t::LEVEL_STARTING,
+                     "waiting for " + (intrinsics_ ? ch_camera_to_base_ : ch_calib_));
+    return;
+  }
+  const StereoCalibration calib = CalibrationFromLcm(*intrinsics_, *camera_to_base_);
   if (vo_ && SameCalibration(calib, active_calibration_)) return;  // periodic repeat
   if (auto s = calib.Validate(); !s.ok()) {
     status_.CountDropped(ch_calib_ + ": " + s.message());
@@ -185,8 +208,8 @@ void StereoVoNode::OnCalibration(const fusionloc::stereo_calibration_t& msg) {
 void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
   status_.CountIn();
   if (!vo_) {
-    status_.CountDropped("stereo frame before a valid " + ch_calib_ +
-                         " (waiting for the calibration)");
+    status_.CountDropped("stereo frame before a valid " + ch_calib_ + " and " + ch_camera_to_base_ +
+                         " (waiting for the calibration and the mounting)");
     return;
   }
   cv::Mat left, right;

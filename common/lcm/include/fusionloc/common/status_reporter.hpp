@@ -37,7 +37,8 @@ class StatusReporter {
   // level: fusionloc::status_t::LEVEL_*; message shown in lcm-spy.
   void SetState(int level, const std::string& message);
 
-  // Publishes if `period_s` has passed since the last report (or if force).
+  // Publishes if `period_s` has passed since the last report, if the state has just become
+  // LEVEL_ERROR (an error is reported at the next tick, not up to a period later), or if force.
   void Tick(bool force = false);
   std::string channel() const { return channel_; }
   const std::string& process() const { return process_; }
@@ -57,6 +58,7 @@ class StatusReporter {
   std::string message_ = "starting";
   std::map<std::string, double> values_;
   Utime last_publish_ = 0;
+  bool error_pending_ = false;  // the level became LEVEL_ERROR since the last report
 };
 
 }  // namespace fl

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <string>
 
+#include "fusionloc/common/robot_description.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
 
@@ -82,7 +83,7 @@ struct OdometryOptions {
 
 // Single-line laser, geometry of a Hokuyo URG-04LX (240 deg, 0.352 deg step, 682 beams).
 struct LaserOptions {
-  bool enabled = true;           // publish LASER
+  bool enabled = true;           // publish LASER and LASER_TO_BASE
   double rate_hz = 10.0;         // [Hz] must divide the step rate
   double range_sigma_m = 0.1;    // [m] Gaussian range noise
   double max_range_m = 10.0;     // [m] no return beyond (published as range 0)
@@ -90,6 +91,8 @@ struct LaserOptions {
   double first_angle_deg = -120.0;  // [deg] angle of beam 0, CCW from laser x
   double step_deg = 0.352;          // [deg] angle between beams
   int beams = 682;                  // [count]
+  // Mounting: not in the world file but in the robot description (config/robot/sim.yaml),
+  // set by SimOptions::SetMounting; these defaults are that file's values.
   double x_m = 0.15;  // [m] laser position in the base frame (x forward)
   double y_m = 0.0;   // [m] (y left)
   double z_m = 0.3;   // [m] (z up) scan-plane height; obstacles are all taller than 0.5 m
@@ -104,18 +107,15 @@ struct LaserOptions {
     a->Visit("first_angle_deg", &first_angle_deg);
     a->Visit("step_deg", &step_deg);
     a->Visit("beams", &beams);
-    a->Visit("x_m", &x_m);
-    a->Visit("y_m", &y_m);
-    a->Visit("z_m", &z_m);
   }
   Status Validate() const;
 };
 
 // Rectified stereo pair (Bumblebee2-like), rendered by ray casting; the optical axis is level
-// and points along base x. Left camera pose in the base frame: (x_m, y_m, z_m); the right
-// camera is `baseline_m` to its right.
+// and points along base x. Left camera pose in the base frame: (x_m, y_m, z_m) from the robot
+// description; the right camera is `baseline_m` to its right.
 struct CameraOptions {
-  bool enabled = true;         // publish STEREO (calibration is always published)
+  bool enabled = true;         // publish STEREO, STEREO_CALIBRATION and CAMERA_TO_BASE
   double rate_hz = 2.0;        // [Hz] must divide the step rate
   int width = 640;             // [px]
   int height = 480;            // [px]
@@ -123,6 +123,7 @@ struct CameraOptions {
   double cx = 319.5;           // [px] principal point
   double cy = 239.5;           // [px]
   double baseline_m = 0.12;    // [m]
+  // Mounting, from the robot description (SimOptions::SetMounting; defaults = config/robot/sim.yaml)
   double x_m = 0.2;            // [m] left camera position in the base frame
   double y_m = 0.06;           // [m]
   double z_m = 0.5;            // [m]
@@ -139,9 +140,6 @@ struct CameraOptions {
     a->Visit("cx", &cx);
     a->Visit("cy", &cy);
     a->Visit("baseline_m", &baseline_m);
-    a->Visit("x_m", &x_m);
-    a->Visit("y_m", &y_m);
-    a->Visit("z_m", &z_m);
     a->Visit("pixel_noise_sigma", &pixel_noise_sigma);
     a->Visit("supersampling", &supersampling);
   }
@@ -153,7 +151,7 @@ struct SimOptions {
   double duration_s = 100.0;              // [s] simulated time (paper: 1000 steps of 0.1 s)
   double step_s = 0.1;                    // [s] simulation step (ground truth and odometry)
   int64_t start_utime = 1000000000000000; // [us] time stamp of step 0
-  double calibration_period_s = 1.0;      // [s] STEREO_CALIBRATION repeat period
+  double calibration_period_s = 1.0;      // [s] STEREO_CALIBRATION, LASER_TO_BASE, CAMERA_TO_BASE repeat period
   WorldOptions world;
   RobotOptions robot;
   OdometryOptions odometry;
@@ -173,6 +171,10 @@ struct SimOptions {
     a->Visit("laser", &laser);
     a->Visit("camera", &camera);
   }
+  // Takes the laser's and the camera's mounting from a robot description
+  // (config/robot/sim.yaml). The simulator models a level laser and a level camera looking
+  // along base x: other rotations are an error naming the key.
+  Status SetMounting(const RobotDescription& robot);
   Status Validate() const;
 
   // Number of motion steps (duration / step, rounded); the simulator emits steps + 1 frames.

@@ -18,10 +18,12 @@
 #include "bot_core/images_t.hpp"
 #include "bot_core/planar_lidar_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "fusionloc/common/channel_map.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/time.hpp"
 #include "fusionloc/sim/random.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/sim/sensors.hpp"
 #include "fusionloc/sim/sim_options.hpp"
 #include "fusionloc/sim/world.hpp"
@@ -38,7 +40,9 @@ struct SimFrame {
   double v = 0.0;      // [m/s] true forward speed
   double omega = 0.0;  // [rad/s] true yaw rate
   // Messages due at this step (publish in this order).
-  std::optional<fusionloc::stereo_calibration_t> calibration;
+  std::optional<bot_core::rigid_transform_t> laser_to_base;   // T_base_laser (laser enabled)
+  std::optional<bot_core::rigid_transform_t> camera_to_base;  // T_base_camera (camera enabled)
+  std::optional<fusionloc::stereo_calibration_t> calibration;  // (camera enabled)
   std::optional<bot_core::pose_t> ground_truth;
   std::optional<fusionloc::wheel_odometry_t> odometry;
   std::optional<bot_core::planar_lidar_t> laser;
@@ -77,6 +81,9 @@ class Simulator {
   const SimOptions& options() const { return options_; }
   int64_t total_frames() const { return options_.steps() + 1; }
   fusionloc::stereo_calibration_t Calibration(Utime utime) const;
+  // The mountings of the robot description, as published on LASER_TO_BASE / CAMERA_TO_BASE.
+  bot_core::rigid_transform_t LaserToBase(Utime utime) const;
+  bot_core::rigid_transform_t CameraToBase(Utime utime) const;
   const LaserModel& laser() const { return laser_; }
   const CameraModel& camera() const { return camera_; }
 
@@ -100,6 +107,8 @@ class Simulator {
 // channel names of fl::channels.
 template <class Fn>
 void VisitMessages(const SimFrame& f, Fn&& fn) {
+  if (f.laser_to_base) fn(channels::kLaserToBase, *f.laser_to_base);
+  if (f.camera_to_base) fn(channels::kCameraToBase, *f.camera_to_base);
   if (f.calibration) fn(channels::kStereoCalibration, *f.calibration);
   if (f.ground_truth) fn(channels::kGroundTruth, *f.ground_truth);
   if (f.odometry) fn(channels::kOdometry, *f.odometry);
@@ -114,8 +123,10 @@ struct LogStats {
 };
 // Runs the whole simulation and writes an LCM log (atomically: nothing appears at `path` unless
 // it completes). `progress(done, total)` is called after each frame if given. Throws
-// std::invalid_argument for invalid options, std::runtime_error for I/O failures.
+// std::invalid_argument for invalid options, std::runtime_error for I/O failures. `channels`
+// renames the channels as fl-sim --channel does live.
 LogStats WriteLog(const SimOptions& options, const std::string& path,
-                  const std::function<void(int64_t, int64_t)>& progress = nullptr);
+                  const std::function<void(int64_t, int64_t)>& progress = nullptr,
+                  const ChannelMap& channels = ChannelMap());
 
 }  // namespace fl::sim

@@ -339,11 +339,6 @@ struct RbpfSlamOptions {
                                    //     matcher must absorb at the next one (0.5 s made one ACES
                                    //     seed of six 0.16 m worse)
   int seed = 42;                   // [-] random seed (runs are reproducible)
-  // Laser pose in the base frame (x forward, y left): set by the process from
-  // STEREO_CALIBRATION.T_base_laser when available.
-  double base_laser_x = 0.0;       // [m]
-  double base_laser_y = 0.0;       // [m]
-  double base_laser_yaw = 0.0;     // [rad]
   GridOptions grid;
   MotionOptions motion;
   MatcherOptions matcher;
@@ -359,9 +354,6 @@ struct RbpfSlamOptions {
     a->Visit("max_turn_rate", &max_turn_rate);
     a->Visit("turn_skip_max_gap", &turn_skip_max_gap);
     a->Visit("seed", &seed);
-    a->Visit("base_laser_x", &base_laser_x);
-    a->Visit("base_laser_y", &base_laser_y);
-    a->Visit("base_laser_yaw", &base_laser_yaw);
     a->Visit("grid", &grid);
     a->Visit("motion", &motion);
     a->Visit("matcher", &matcher);

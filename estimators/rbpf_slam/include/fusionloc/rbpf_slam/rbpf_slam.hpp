@@ -104,7 +104,8 @@ class RbpfSlam {
   int num_particles() const { return static_cast<int>(particles_.size()); }
   const RbpfSlamStats& stats() const { return stats_; }
   const RbpfSlamOptions& options() const { return opt_; }
-  // Sets the laser pose in the base frame (before the first scan).
+  // Sets the laser pose in the base frame (before the first scan; identity until then). It is
+  // the robot description's (LASER_TO_BASE, docs/ROBOT.md), not an option.
   fl::Status SetBaseLaser(const fl::Pose2& T_base_laser);
 
   // N_eff = 1 / Σ w_i² of normalised weights.

@@ -2,7 +2,7 @@
 // conversions and FusionNode, which fl-fusion and fl-replay run.
 //
 // In:  RBPF_POSE (laser-rate nodes), RBPF_FACTORS and VO_FACTORS (between-factors), ODOMETRY,
-//      VO_POINTS (keyframe points for the 3D map), STEREO_CALIBRATION (T_base_camera).
+//      VO_POINTS (keyframe points for the 3D map), CAMERA_TO_BASE (T_base_camera).
 // Out: FUSED_POSE (at the laser rate), FUSED_TRAJECTORY (when it changes), FUSED_MAP (on exit
 //      and on request), STATUS_FL_FUSION.
 // Live, the full solve (loop closure / periodic) runs on a worker thread while fused poses
@@ -16,11 +16,11 @@
 #include <vector>
 
 #include "bot_core/pose_t.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/fusion/fusion_config.hpp"
 #include "fusionloc/point_cloud_t.hpp"
 #include "fusionloc/relative_pose_factor_t.hpp"
-#include "fusionloc/stereo_calibration_t.hpp"
 #include "fusionloc/trajectory_t.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
@@ -75,12 +75,12 @@ class FusionNode : public LcmNode {
   LcmInterface* lcm_;
   bool async_;
   bool with_time_;  // wall-clock times in what is published (live only)
-  std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_calib_, ch_pose_, ch_trajectory_, ch_map_;
+  std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_camera_to_base_, ch_pose_, ch_trajectory_, ch_map_;
   FactorGraphFusion fusion_;
   PointMap map_;
   StatusReporter status_;
   Eigen::Isometry3d T_base_camera_ = Eigen::Isometry3d::Identity();
-  bool have_calibration_ = false;
+  bool have_camera_to_base_ = false;
   std::unique_ptr<FullSolveJob> job_;
   std::future<void> job_future_;
   SolveSummary last_full_;

@@ -14,6 +14,8 @@
 // PosesFromOxts).
 //
 // Output channels:
+//   CAMERA_TO_BASE      bot_core.rigid_transform_t T_base_camera (base = cam0 with base axes;
+//                       the left camera's offset from the drive's calibration), with ...
 //   STEREO_CALIBRATION  fusionloc.stereo_calibration_t, before the first frame and again every
 //                       calibration_period_s (so a late subscriber gets it).
 //   STEREO              bot_core.images_t: LEFT (0) then RIGHT (1), 8-bit GRAY, row_stride =

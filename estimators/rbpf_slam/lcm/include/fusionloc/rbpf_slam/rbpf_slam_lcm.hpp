@@ -3,8 +3,8 @@
 // and fl-replay run.
 //
 // In:  LASER (bot_core.planar_lidar_t), ODOMETRY (fusionloc.wheel_odometry_t, interpolated at
-//      each scan's time), STEREO_CALIBRATION (fusionloc.stereo_calibration_t: T_base_laser, read
-//      before the first scan; identity if never received).
+//      each scan's time), LASER_TO_BASE (bot_core.rigid_transform_t: T_base_laser, the robot
+//      description's mounting, read before the first scan; identity, with a warning, if not).
 // Out: RBPF_POSE (bot_core.pose_t, every scan), RBPF_FACTORS (fusionloc.relative_pose_factor_t,
 //      ICP factors between laser keyframes in the base frame, information in the x, y, yaw
 //      rows/cols 0, 1, 5), RBPF_TRAJECTORY (fusionloc.trajectory_t, keyframe poses whenever the
@@ -99,7 +99,7 @@ class RbpfSlamNode : public LcmNode {
   std::string Summary() const override;
 
  private:
-  void OnCalibration(const Pose2& T_base_laser);
+  void OnLaserToBase(const Pose2& T_base_laser);
   void OnLaser(const bot_core::planar_lidar_t& msg);
   // Runs every scan the synchronisation hands on (with flush: every scan still waiting too).
   void ProcessReady(bool flush);
@@ -108,13 +108,13 @@ class RbpfSlamNode : public LcmNode {
 
   RbpfSlamNodeOptions node_options_;
   LcmInterface* lcm_;
-  std::string ch_laser_, ch_odometry_, ch_calibration_, ch_pose_, ch_factors_, ch_trajectory_,
+  std::string ch_laser_, ch_odometry_, ch_laser_to_base_, ch_pose_, ch_factors_, ch_trajectory_,
       ch_map_;
   RbpfSlam slam_;
   ScanOdometrySync sync_;
   StatusReporter status_;
   RateLimitedWarning warn_;
-  bool have_calibration_ = false;
+  bool have_laser_to_base_ = false;
   bool started_ = false;
   Utime last_map_utime_ = 0, last_utime_ = 0;
 };

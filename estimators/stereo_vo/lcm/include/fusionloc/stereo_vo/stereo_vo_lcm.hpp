@@ -8,12 +8,14 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 
 #include "bot_core/images_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/point_cloud_t.hpp"
@@ -30,8 +32,10 @@ fl::Status ImageToGray(const bot_core::image_t& image, cv::Mat* gray);
 // The LEFT and RIGHT images of a stereo images_t as gray.
 fl::Status StereoImagesToGray(const bot_core::images_t& images, cv::Mat* left, cv::Mat* right);
 
-// Library calibration from the message (no validation: StereoCalibration::Validate does it).
-StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg);
+// Library calibration from the camera's own calibration and its mounting (CAMERA_TO_BASE, the
+// robot description's T_base_camera); no validation: StereoCalibration::Validate does it.
+StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg,
+                                     const bot_core::rigid_transform_t& camera_to_base);
 
 bot_core::pose_t PoseToLcm(Utime utime, const Eigen::Isometry3d& T_world_base);
 fusionloc::relative_pose_factor_t FactorToLcm(const KeyframeFactor& factor);
@@ -51,16 +55,24 @@ class StereoVoNode : public LcmNode {
   ~StereoVoNode() override;
 
   StatusReporter& status() override { return status_; }
-  std::vector<std::string> RequiredInputs() const override { return {ch_stereo_, ch_calib_}; }
+  std::vector<std::string> RequiredInputs() const override {
+    return {ch_stereo_, ch_calib_, ch_camera_to_base_};
+  }
   std::string Summary() const override;
 
  private:
   void OnCalibration(const fusionloc::stereo_calibration_t& msg);
+  void OnCameraToBase(const bot_core::rigid_transform_t& msg);
+  // Starts the VO once both the intrinsics and the mounting are known; restarts it when either
+  // changes (the periodic repeats do not).
+  void StartOrRestart();
   void OnStereo(const bot_core::images_t& msg);
 
   StereoVoOptions options_;
   LcmInterface* lcm_;
-  std::string ch_stereo_, ch_calib_, ch_pose_, ch_factors_, ch_points_;
+  std::string ch_stereo_, ch_calib_, ch_camera_to_base_, ch_pose_, ch_factors_, ch_points_;
+  std::optional<fusionloc::stereo_calibration_t> intrinsics_;
+  std::optional<bot_core::rigid_transform_t> camera_to_base_;
   StatusReporter status_;
   std::unique_ptr<StereoVo> vo_;
   StereoCalibration active_calibration_;
