@@ -36,7 +36,21 @@ constexpr const char* kFusedPose = "FUSED_POSE";              // fusionloc.fused
 constexpr const char* kFusedTrajectory = "FUSED_TRAJECTORY";  // fusionloc.trajectory_t
 constexpr const char* kFusedMap = "FUSED_MAP";                // fusionloc.point_cloud_t (map frame)
 
+// ---- process management (libbot2's procman protocol; docs/PROCMAN.md) ----
+constexpr const char* kPmdOrders = "PMD_ORDERS2";     // bot_procman.orders2_t, sheriff -> deputy
+constexpr const char* kPmdInfo = "PMD_INFO2";         // bot_procman.info2_t, deputy status, 1 Hz
+constexpr const char* kPmdPrintf = "PMD_PRINTF";      // bot_procman.printf_t, command output
+constexpr const char* kPmdDiscover = "PMD_DISCOVER";  // bot_procman.discovery_t
+// fl-procman-ctl -> fl-procman-sheriff: one order line ("restart fusion"), as a printf_t
+// (sheriff_id 0, deputy_name = the sender, text = the line).
+constexpr const char* kPmdSheriffCtl = "PMD_SHERIFF_CTL";
+
 // ---- health: STATUS_<PROCESS>, e.g. STATUS_FL_SIM; subscribe "STATUS_.*" for all ----
 constexpr const char* kStatusPrefix = "STATUS_";
+
+// ---- signed procman orders (beyond libbot2; docs/PROCMAN_SECURITY.md) ----
+// fusionloc.procman_signed_orders_t: a bot_procman.orders2_t with a MAC, sheriff -> deputy
+// (procman/include/fusionloc/procman/order_auth.hpp).
+constexpr const char* kPmdOrdersSigned = "PMD_ORDERS2_SIGNED";
 
 }  // namespace fl::channels

@@ -1,0 +1,245 @@
+// fl-bench-system (./fusionloc bench system): fl-sim, fl-rbpf-slam, fl-stereo-vo and
+// fl-fusion as separate processes, started by a procman deputy (fl::procman::Deputy, in this
+// process), talking over loopback UDP multicast; the simulator runs in real time at its
+// rates with 640x480 stereo at each rate of --stereo-rates. Measured by a subscriber here:
+//  - latency [ms] from a LASER message's arrival to the arrival of the FUSED_POSE of the
+//    same time stamp (the first fused pose that includes the scan): p50, p99, max;
+//  - messages lost per sensor channel: what the simulator published (its deterministic
+//    schedule, checked against the total it reports) minus what arrived here; and the scans
+//    that got no fused pose;
+//  - CPU [% of one core] over the run and peak resident memory [MB] per process (the deputy's
+//    /proc and wait4 figures).
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <regex>
+#include <sstream>
+#include <thread>
+
+#include "bot_core/planar_lidar_t.hpp"
+#include "fusionloc/bench/bench.hpp"
+#include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/number_format.hpp"
+#include "fusionloc/common/program.hpp"
+#include "fusionloc/common/shutdown.hpp"
+#include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/fused_pose_t.hpp"
+#include "fusionloc/procman/deputy.hpp"
+#include "fusionloc/sim/sim_options.hpp"
+
+namespace {
+
+double Now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+int64_t WallUs() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+struct Setup {
+  std::string bin, config_dir, out_dir, world = "paper";
+  double duration_s = 30.0;
+  int port = 7650;
+};
+
+// Messages of each sensor channel the simulator publishes for `o` (its schedule).
+std::map<std::string, int64_t> Schedule(const fl::sim::SimOptions& o) {
+  const int64_t frames = o.steps() + 1;
+  auto count = [&](int64_t period) { return period <= 0 ? 0 : (frames - 1) / period + 1; };
+  std::map<std::string, int64_t> n;
+  n["GROUND_TRUTH"] = frames;
+  n["STEREO_CALIBRATION"] = count(o.PeriodSteps(1.0 / o.calibration_period_s));
+  n["ODOMETRY"] = count(o.PeriodSteps(o.odometry.rate_hz));
+  n["LASER"] = o.laser.enabled ? count(o.PeriodSteps(o.laser.rate_hz)) : 0;
+  n["STEREO"] = o.camera.enabled ? count(o.PeriodSteps(o.camera.rate_hz)) : 0;
+  return n;
+}
+
+fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
+  const std::string rate = stereo_hz == std::floor(stereo_hz)
+                               ? std::to_string(static_cast<int>(stereo_hz))
+                               : fl::FormatDouble(stereo_hz);
+  const std::string name = "stereo-" + rate + "hz";
+  const std::string dir = s.out_dir + "/" + name;
+  std::filesystem::create_directories(dir);
+  fl::sim::SimOptions sim = fl::sim::DefaultOptionsForWorld(s.world);
+  sim.camera.rate_hz = stereo_hz;
+  sim.duration_s = s.duration_s;
+  const fl::Status valid = sim.Validate();
+  if (!valid.ok()) throw fl::UsageError("simulator options: " + valid.message());
+  {
+    std::ofstream yaml(dir + "/sim.yaml");
+    yaml << fl::SaveYamlString(sim);
+  }
+  const std::string url =
+      "udpm://239.255.76.67:" + std::to_string(s.port) + "?ttl=0&recv_buf_size=16777216";
+  auto lcm = fl::MakeLcm(url);
+  std::map<std::string, int64_t> received;
+  std::map<int64_t, double> laser_at, fused_at;
+  lcm->SubscribeRaw(".*",
+                    [&](const std::string& ch, const void*, int, fl::Utime) { ++received[ch]; });
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER", [&](const auto& m, const std::string&) { laser_at.emplace(m.utime, Now()); });
+  lcm->Subscribe<fusionloc::fused_pose_t>(
+      "FUSED_POSE", [&](const auto& m, const std::string&) { fused_at.emplace(m.utime, Now()); });
+
+  fl::procman::DeputyOptions dopt;
+  dopt.name = "bench";
+  dopt.log_dir = dir;
+  dopt.vars = {{"BIN", s.bin}, {"CONFIG", s.config_dir}, {"URL", url}, {"SIM", dir + "/sim.yaml"}};
+  fl::procman::Deputy deputy(dopt, nullptr);
+  fl::procman::Orders orders;
+  orders.host = "bench";
+  const char* execs[][2] = {
+      {"rbpf_slam", "${BIN}/fl-rbpf-slam --lcm-url=${URL} --config ${CONFIG}/rbpf_slam.yaml"},
+      {"stereo_vo", "${BIN}/fl-stereo-vo --lcm-url=${URL} --config ${CONFIG}/stereo_vo.yaml"},
+      {"fusion", "${BIN}/fl-fusion --lcm-url=${URL} --config ${CONFIG}/fusion.yaml"},
+      {"sim",
+       "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${SIM} --rate 1"}};
+  for (int i = 0; i < 4; ++i) {
+    fl::procman::CommandOrder c;
+    c.spec.sheriff_id = i + 1;
+    c.spec.name = execs[i][0];
+    c.spec.exec = execs[i][1];
+    c.spec.stop_signal = 15;
+    c.spec.stop_time_allowed_s = 10;
+    c.desired_runid = i < 3 ? 1 : 0;  // the simulator once the others listen
+    orders.cmds.push_back(c);
+  }
+  auto spin = [&](double seconds, const std::function<bool()>& done) {
+    const double end = Now() + seconds;
+    while (Now() < end && !fl::ShutdownRequested() && !(done && done())) {
+      lcm->HandleSubscriptions(2);
+      deputy.Poll();
+    }
+  };
+  orders.utime_us = WallUs();
+  deputy.HandleOrders(orders, WallUs());
+  spin(2.5, nullptr);
+  const double t0 = Now();
+  orders.cmds[3].desired_runid = 1;
+  orders.utime_us = WallUs();
+  deputy.HandleOrders(orders, WallUs());
+  auto sim_done = [&] {
+    for (const auto& c : deputy.Commands()) {
+      if (c.spec.name == "sim") return c.exited;
+    }
+    return false;
+  };
+  fl::bench::Progress progress("bench system " + name, static_cast<int64_t>(s.duration_s));
+  double next_measure = Now() + 1.0;
+  while (!sim_done() && !fl::ShutdownRequested() && Now() - t0 < 4 * s.duration_s + 30) {
+    spin(0.05, nullptr);
+    if (Now() >= next_measure) {
+      deputy.MeasureStatus(WallUs());  // peak memory, CPU
+      next_measure += 1.0;
+      progress.Update(
+          std::min<int64_t>(static_cast<int64_t>(Now() - t0), static_cast<int64_t>(s.duration_s)));
+    }
+  }
+  progress.Finish();
+  spin(3.0, nullptr);  // the last scans through the estimators and the fusion
+  deputy.MeasureStatus(WallUs());
+  const double wall_s = Now() - t0;
+  deputy.StopAll();
+
+  fl::bench::Run run;
+  run.name = name;
+  run.input = "world " + s.world + ", " + fl::FormatDouble(s.duration_s) + " s real time";
+  std::vector<double> latency_ms;
+  for (const auto& [utime, at] : laser_at) {
+    auto f = fused_at.find(utime);
+    if (f != fused_at.end()) latency_ms.push_back(1e3 * (f->second - at));
+  }
+  const fl::bench::Stats lat = fl::bench::ComputeStats(latency_ms);
+  run.Add("latency_ms_p50", lat.median)
+      .Add("latency_ms_p99", lat.p99)
+      .Add("latency_ms_max", lat.max);
+  const std::map<std::string, int64_t> expected = Schedule(sim);
+  int64_t total_expected = 0, lost = 0;
+  for (const auto& [ch, n] : expected) {
+    total_expected += n;
+    const int64_t l = n - received[ch];
+    lost += std::max<int64_t>(0, l);
+    if (ch == "LASER" || ch == "STEREO" || ch == "ODOMETRY")
+      run.Add("lost_" + ch, static_cast<double>(l));
+  }
+  run.Add("scans_without_fused_pose",
+          static_cast<double>(expected.at("LASER")) - static_cast<double>(latency_ms.size()));
+  for (const auto& c : deputy.Commands()) {
+    run.Add("cpu_pct_" + c.spec.name, 100.0 * c.cpu_time_s / wall_s);
+    run.Add("peak_rss_mb_" + c.spec.name, static_cast<double>(c.peak_rss_bytes) / 1048576.0);
+  }
+  // The schedule must be what the simulator says it published (its STATUS_FL_SIM included).
+  std::smatch m;
+  const std::string sim_log = ReadFile(dir + "/sim.log");
+  std::ostringstream note;
+  if (std::regex_search(sim_log, m, std::regex("published [0-9]+ steps \\(([0-9]+) messages\\)")) &&
+      std::stoll(m[1]) != total_expected + received["STATUS_FL_SIM"]) {
+    note << "schedule " << total_expected << " + status " << received["STATUS_FL_SIM"]
+         << " != published " << m[1] << "; ";
+  }
+  note << (lat.p99 <= 20.0 ? "p99 <= 20 ms: met" : "p99 <= 20 ms: NOT met") << "; "
+       << (lost == 0 ? "nothing lost: met"
+                     : "nothing lost: NOT met (" + std::to_string(lost) + ")");
+  run.note = note.str();
+  return run;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  fl::Program program(
+      "fl-bench-system",
+      "The whole pipeline as separate processes under a procman deputy over loopback UDP "
+      "multicast, the simulator in real time: latency LASER -> FUSED_POSE (p50, p99), "
+      "messages lost per channel, CPU and peak memory per process; once per stereo rate. "
+      "Targets: p99 <= 20 ms, nothing lost.");
+  fl::bench::CommonArgs common;
+  fl::bench::AddCommonFlags(&program.cli(), &common, "system");
+  Setup s;
+  std::string rates = "2,10";
+  char self[4096] = {0};
+  if (readlink("/proc/self/exe", self, sizeof(self) - 1) > 0) {
+    s.bin = std::filesystem::path(self).parent_path().string();
+  }
+  s.config_dir = "config";
+  s.out_dir = "out/bench/system";
+  program.cli().AddFlag("bin", &s.bin, "folder of the fl-* programs");
+  program.cli().AddFlag("config-dir", &s.config_dir,
+                        "folder of rbpf_slam.yaml, stereo_vo.yaml, fusion.yaml");
+  program.cli().AddFlag("out", &s.out_dir, "folder for the processes' logs");
+  program.cli().AddFlag("world", &s.world, "simulated world: paper or corridor");
+  program.cli().AddFlag("duration", &s.duration_s, "[s] simulated (= wall) time per run");
+  program.cli().AddFlag("stereo-rates", &rates,
+                        "[Hz] stereo rates, one run each (comma-separated)");
+  program.cli().AddFlag("port", &s.port, "UDP port of the benchmark's LCM (loopback, ttl=0)");
+  if (!program.Parse(argc, argv)) return program.exit_code();
+  return program.Run([&] {
+    fl::InstallShutdownHandlers();
+    fl::bench::Report report("system");
+    std::stringstream in(rates);
+    for (std::string r; std::getline(in, r, ',');) {
+      if (r.empty()) continue;
+      report.AddRun(RunOnce(s, std::stod(r)));
+      if (fl::ShutdownRequested()) return fl::kExitFailure;
+    }
+    fl::bench::Publish(report, common);
+    return fl::kExitOk;
+  });
+}
