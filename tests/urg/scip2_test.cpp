@@ -89,6 +89,11 @@ TEST(Scip2, ParsesAPpReplyAndRejectsABadChecksum) {
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.message().find("checksum error in line 'DMIN:20;5'"), std::string::npos)
       << bad.message();
+  // A checksum character that is ';' itself (the timer value decides it).
+  r.lines[3] = "TIME:000002;;";
+  ASSERT_EQ(Checksum("TIME:000002"), ';');
+  ASSERT_TRUE(ParseInfo(r, &info).ok()) << ParseInfo(r, &info).message();
+  EXPECT_EQ(info["TIME"], "000002");
   r.lines[3] = "DMIN 20";
   EXPECT_NE(ParseInfo(r, &info).message().find("malformed line 'DMIN 20'"), std::string::npos);
 }

@@ -67,4 +67,20 @@ TEST(UrgPrograms, BadOptionsAreUsageErrors) {
   EXPECT_NE(e.err.find("unknown key 'cluster'"), std::string::npos) << e.err;
 }
 
+// The config files document the defaults: loading them changes nothing.
+TEST(UrgPrograms, ConfigFilesHoldTheDefaults) {
+  TempDir dir;
+  for (const char* name : {"urg-driver", "urg-emulator"}) {
+    const std::string p = name;
+    std::string file = p;
+    file.replace(file.find('-'), 1, "_");
+    const auto defaults = RunCommand(BinDir() + "/fl-" + p + " --print-config", dir);
+    const auto loaded = RunCommand(BinDir() + "/fl-" + p + " --print-config --config " +
+                                       fl::test::SourceDir() + "/config/" + file + ".yaml",
+                                   dir);
+    ASSERT_EQ(loaded.status, 0) << loaded.err;
+    EXPECT_EQ(loaded.out, defaults.out) << p;
+  }
+}
+
 }  // namespace

@@ -187,10 +187,12 @@ Status ParseInfo(const Response& r, std::map<std::string, std::string>* info) {
   info->clear();
   for (size_t i = 2; i < r.lines.size(); ++i) {
     const std::string& line = r.lines[i];
+    // KEY:VALUE;S. The checksum S may itself be ';' or ':', so the separator is found from
+    // the end: it is the second-last character.
+    const size_t semi = line.size() >= 3 ? line.size() - 2 : std::string::npos;
     const size_t colon = line.find(':');
-    const size_t semi = line.rfind(';');
-    if (colon == std::string::npos || semi == std::string::npos || semi < colon ||
-        semi + 2 != line.size()) {
+    if (semi == std::string::npos || line[semi] != ';' || colon == std::string::npos ||
+        colon > semi) {
       return Status::Error("malformed line '" + line + "' in the reply to " + r.echo() +
                            " (expected KEY:VALUE;checksum)");
     }

@@ -21,10 +21,12 @@ Status UrgDriverOptions::Validate() const {
     return Status::Error("baud must be 19200, 38400, 57600, 115200, 230400 or 500000 (got " +
                          std::to_string(baud) + ")");
   }
-  if (target_baud != 0 && !IsScipBaud(target_baud)) {
+  // SCIP also knows 250000 and 750000, which termios cannot set on the host side.
+  if (target_baud != 0 && target_baud != 19200 && target_baud != 38400 && target_baud != 57600 &&
+      target_baud != 115200 && target_baud != 500000) {
     return Status::Error(
-        "target_baud must be 0 or a SCIP bit rate (19200, 38400, 57600, "
-        "115200, 250000, 500000, 750000), got " +
+        "target_baud must be 0 (keep) or 19200, 38400, 57600, 115200 or 500000 "
+        "(a rate both SCIP's SS and the host's serial port support), got " +
         std::to_string(target_baud));
   }
   if (start_step < -1 || end_step < -1 ||
