@@ -44,6 +44,18 @@ TEST(UrgSensor, ConnectReadsTheUrg04lxParameters) {
   EXPECT_NEAR(i.StepAngle(725), 119.8828125 * M_PI / 180.0, 1e-12);
 }
 
+TEST(UrgSensor, ASensorInScip11IsSwitchedToScip20) {
+  UrgEmulatorOptions eo;
+  eo.scip1_at_power_on = true;
+  SensorOptions so;
+  so.reply_timeout_s = 0.3;
+  Rig rig(eo, so);
+  EXPECT_FALSE(rig.emu.in_scip2());
+  ASSERT_TRUE(rig.sensor->Connect().ok());
+  EXPECT_TRUE(rig.emu.in_scip2());
+  EXPECT_EQ(rig.sensor->info().amax, 725);
+}
+
 TEST(UrgSensor, AWrongModelIsNamedWithTheFix) {
   UrgEmulatorOptions eo;
   eo.product = "SOKUIKI Sensor UTM-30LX";

@@ -155,6 +155,7 @@ std::string UrgEmulator::device_path() const {
 void UrgEmulator::PowerOn(Utime now) {
   std::lock_guard<std::mutex> lock(mu_);
   power_on_ = now;
+  scip2_ = !options_.scip1_at_power_on;
   laser_ = adjust_ = streaming_ = false;
   current_baud_ = 19200;
   input_.clear();
@@ -372,6 +373,15 @@ void UrgEmulator::HandleLine(const std::string& raw, Utime now) {
   const size_t semi = line.find(';');
   const std::string body = line.substr(0, semi);
   const std::string tag = semi == std::string::npos ? "" : line.substr(semi + 1);
+  if (!scip2_) {
+    // SCIP 1.1: the switch command answers a bare "0" (C-42-03320B section 2); SCIP 2.0
+    // commands mean nothing here and get no SCIP 2.0 reply.
+    if (line == "SCIP2.0") {
+      scip2_ = true;
+      Reply("SCIP2.0\n0\n\n");
+    }
+    return;
+  }
   if (tag.size() > 16) return status_reply("0G");
   if (body == "SCIP2.0") return status_reply("0E");  // already in SCIP 2.0
   if (body.size() < 2) return status_reply("0D");

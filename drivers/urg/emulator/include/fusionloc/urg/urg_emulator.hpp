@@ -30,14 +30,16 @@ struct UrgEmulatorOptions {
   std::string protocol = "SCIP 2.0";
   std::string serial = "H0614967";
   std::string model = "URG-04LX(Hokuyo Automatic Co.,Ltd.)";
-  int dmin_mm = 20;    // [mm] DMIN
-  int dmax_mm = 5600;  // [mm] DMAX
-  int ares = 1024;     // [steps] ARES, steps per turn
-  int amin = 44;       // [step] AMIN
-  int amax = 725;      // [step] AMAX
-  int afrt = 384;      // [step] AFRT, the front
-  int max_step = 768;  // [step] last step a command may ask for (step D)
-  int scan_rpm = 600;  // [rpm] SCAN (10 scans/s)
+  int dmin_mm = 20;                // [mm] DMIN
+  int dmax_mm = 5600;              // [mm] DMAX
+  int ares = 1024;                 // [steps] ARES, steps per turn
+  int amin = 44;                   // [step] AMIN
+  int amax = 725;                  // [step] AMAX
+  int afrt = 384;                  // [step] AFRT, the front
+  int max_step = 768;              // [step] last step a command may ask for (step D)
+  int scan_rpm = 600;              // [rpm] SCAN (10 scans/s)
+  bool scip1_at_power_on = false;  // start in SCIP 1.1, like a URG-04LX set so: then only
+                                   // "SCIP2.0" is answered ("0": switched), until a restart
   // ---- scene ----
   sim::WorldOptions world = [] {  // the simulator's world; the corridor suits a 5.6 m range
     sim::WorldOptions w;
@@ -80,6 +82,7 @@ struct UrgEmulatorOptions {
     a->Visit("afrt", &afrt);
     a->Visit("max_step", &max_step);
     a->Visit("scan_rpm", &scan_rpm);
+    a->Visit("scip1_at_power_on", &scip1_at_power_on);
     a->Visit("world", &world);
     a->Visit("seed", &seed);
     a->Visit("x_m", &x_m);
@@ -140,6 +143,8 @@ class UrgEmulator {
   const std::vector<float>& true_ranges() const { return true_ranges_; }
   double StepAngle(int step) const;
   int64_t commands() const { return commands_; }
+  // False while in SCIP 1.1 (see scip1_at_power_on).
+  bool in_scip2() const { return scip2_; }
   int64_t vanishes() const { return vanishes_; }
   const UrgEmulatorOptions& options() const { return options_; }
 
@@ -168,6 +173,7 @@ class UrgEmulator {
   Utime power_on_ = 0;
   Utime start_ = 0;
   bool laser_ = false, adjust_ = false, streaming_ = false;
+  std::atomic<bool> scip2_{true};
   int remaining_ = 0, skip_ = 0, skip_count_ = 0, encoding_ = 3;
   int start_step_ = 44, end_step_ = 725, cluster_ = 1;
   bool infinite_ = false;
