@@ -39,8 +39,14 @@ TEST(UrgDriverNode, PublishesScansInMetresAndTheSensorInTheStatus) {
   o.port = eo.link;
   {
     UrgDriverNode node(o, lcm.get(), ChannelMap());
-    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(1500);
+    const auto start = std::chrono::steady_clock::now();
+    const auto end = start + std::chrono::milliseconds(2500);
+    bool injected = false;
     while (std::chrono::steady_clock::now() < end) {
+      if (!injected && std::chrono::steady_clock::now() > start + std::chrono::milliseconds(400)) {
+        emu.InjectChecksumErrors(1);
+        injected = true;
+      }
       lcm->HandleSubscriptions(50);
       node.Poll();
       node.status().Tick();
@@ -72,6 +78,15 @@ TEST(UrgDriverNode, PublishesScansInMetresAndTheSensorInTheStatus) {
     EXPECT_TRUE(values.count(k)) << k;
   }
   EXPECT_EQ(values["reconnects"], 0.0);
+  EXPECT_EQ(values["checksum_errors"], 1.0);
+  // The dropped scan shows as a warning that names it.
+  bool warned = false;
+  for (const auto& x : statuses) {
+    if (x.level == fusionloc::status_t::LEVEL_WARN &&
+        x.message.find("checksum error") != std::string::npos)
+      warned = true;
+  }
+  EXPECT_TRUE(warned);
   EXPECT_GE(values["scans"], 8.0);
 }
 

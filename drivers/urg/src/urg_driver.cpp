@@ -79,6 +79,7 @@ UrgDriver::~UrgDriver() { Stop(); }
 void UrgDriver::SetError(const std::string& e) {
   std::lock_guard<std::mutex> lock(mu_);
   stats_.last_error = e;
+  stats_.last_error_utime = MonotonicUtime();
 }
 
 std::string UrgDriver::ResolvePort(std::string* why) {
@@ -222,6 +223,7 @@ std::string UrgDriver::Stream() {
       stats_.checksum_errors = sensor_->checksum_errors();
       stats_.malformed = sensor_->malformed();
       stats_.last_error = message;
+      stats_.last_error_utime = MonotonicUtime();
       continue;
     }
     if (r == ReadResult::kDeviceError) {
@@ -229,6 +231,7 @@ std::string UrgDriver::Stream() {
         std::lock_guard<std::mutex> lock(mu_);
         ++stats_.device_errors;
         stats_.last_error = message;
+        stats_.last_error_utime = MonotonicUtime();
       }
       FL_LOG(WARN) << message;
     }
@@ -244,6 +247,7 @@ std::string UrgDriver::Stream() {
                               ? "stream from '" + sensor_->name() + "' stalled for " +
                                     std::to_string(options_.stall_timeout_s) + " s; restarted"
                               : message;
+      stats_.last_error_utime = MonotonicUtime();
     }
     FL_LOG(WARN) << "no scan from " << sensor_->name() << " for " << options_.stall_timeout_s
                  << " s: restarting the stream";
@@ -265,6 +269,7 @@ void UrgDriver::Run() {
       std::lock_guard<std::mutex> lock(mu_);
       stats_.connected = false;
       stats_.last_error = why;
+      stats_.last_error_utime = MonotonicUtime();
     }
     sensor_.reset();
     port_.reset();

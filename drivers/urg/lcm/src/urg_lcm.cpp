@@ -56,7 +56,9 @@ void UrgDriverNode::Poll() {
   if (!st.connected) {
     status_.SetState(fusionloc::status_t::LEVEL_ERROR,
                      "disconnected from " + who + ": " + st.last_error + "; reconnecting");
-  } else if (!st.last_error.empty()) {
+  } else if (!st.last_error.empty() &&
+             MonotonicUtime() - st.last_error_utime < 10 * kUtimePerSecond) {
+    // A problem in the last 10 s (a dropped scan, a restarted stream): WARN, then OK again.
     status_.SetState(fusionloc::status_t::LEVEL_WARN, who + "; last problem: " + st.last_error);
   } else {
     status_.SetState(fusionloc::status_t::LEVEL_OK, who);

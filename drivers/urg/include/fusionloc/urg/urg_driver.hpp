@@ -86,9 +86,10 @@ struct DriverStats {
   int64_t stalls = 0;           // streams restarted after stall_timeout_s without a scan
   int64_t device_errors = 0;    // error statuses reported by the sensor
   bool connected = false;
-  std::string device;      // the port in use
-  std::string sensor;      // VV/PP: "URG-04LX serial H0614967, firmware ..."
-  std::string last_error;  // last problem, "" if none
+  std::string device;          // the port in use
+  std::string sensor;          // VV/PP: "URG-04LX serial H0614967, firmware ..."
+  std::string last_error;      // last problem, "" if none
+  Utime last_error_utime = 0;  // [us] monotonic time of last_error
   double residual_ms = 0.0, skew_ppm = 0.0, latency_ms = 0.0, tm_round_trip_ms = 0.0;
 };
 
