@@ -4,6 +4,7 @@
 #include <iostream>
 #include <thread>
 
+#include "fusionloc/common/log.hpp"
 #include "fusionloc/common/program.hpp"
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/urg/urg_emulator.hpp"
@@ -30,6 +31,8 @@ int main(int argc, char** argv) {
     fl::urg::UrgEmulator emulator(options);
     if (fl::Status s = emulator.Start(); !s.ok()) throw std::runtime_error(s.message());
     std::cout << emulator.device_path() << std::endl;
+    FL_LOG(INFO) << "emulated URG-04LX on " << emulator.slave_path()
+                 << (options.link.empty() ? "" : " (link " + options.link + ")");
     fl::InstallShutdownHandlers();
     const auto start = std::chrono::steady_clock::now();
     while (!fl::ShutdownRequested()) {
