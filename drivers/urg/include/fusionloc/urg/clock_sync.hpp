@@ -3,18 +3,19 @@
 //  1. TimestampUnwrapper turns the 24-bit timer (wraps every 2^24 ms = 4.66 h) into a
 //     continuous count of milliseconds.
 //  2. ClockSync estimates host_time = offset + rate * sensor_time:
-//     - from TM1 replies (TM0 / TM1 x n / TM2 before streaming): the host time of each reading
-//       is taken as the middle of the request's round trip; the mean gives the offset.
-//     - then from scan arrivals (the drift filter): arrival = true time + latency + jitter. Over
-//       the first scans (latency_scans, min_span_s) a least-squares line through (sensor time,
-//       arrival) gives the rate; its distance from the TM estimate at the TM's time is the
-//       latency (time of the last step, transfer, mean jitter). Afterwards a line through
-//       (sensor time, arrival - latency) over a sliding window tracks offset and rate (skew).
+//     - from TM1 replies (TM0 / TM1 x n / TM2 before streaming): the reading of the request
+//       with the shortest round trip, placed in the middle of it, gives the offset.
+//     - then from scan arrivals (the drift filter): arrival = true time + latency + delay. A
+//       line through (sensor time, arrival) over a sliding window tracks offset and rate
+//       (skew); read delays are one-sided, so it is fit to the lower envelope of the arrivals.
+//       The latency (time of the last step, transfer) is the smallest distance of the first
+//       scans after TM from the TM anchor at the current rate; stamps are the line minus it.
 //     The residual (RMS of the line's misfit) is what the driver reports in its status.
 #pragma once
 
 #include <cstdint>
 #include <deque>
+#include <vector>
 
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
@@ -36,8 +37,8 @@ class TimestampUnwrapper {
 
 struct ClockSyncOptions {
   int window = 300;          // [scans] drift-filter window (30 s at 10 Hz)
-  int latency_scans = 10;    // [scans] at least this many scans (and min_span_s) to learn the
-                             //         arrival latency after TM
+  int latency_scans = 50;    // [scans] the first scans after TM whose least delayed gives the
+                             //         arrival latency (>= 10; more: robust to a busy host)
   double min_span_s = 2.0;   // [s] sensor-time span of arrivals before the rate is estimated
   double outlier_ms = 20.0;  // [ms] arrivals later than the fit by more than this are not used
                              //      (a delayed read, not clock drift)
@@ -76,11 +77,12 @@ class ClockSync {
   double skew_ppm() const;
   // Host - sensor time at the reference [us].
   double offset_us() const { return host_ref_us_ - sensor_ref_ms_ * 1000.0; }
-  // RMS misfit of the drift filter over its window [ms] (0 before it runs).
+  // RMS of the window's arrivals about the drift filter's line [ms]: read-delay jitter plus
+  // misfit (0 before the filter runs).
   double residual_ms() const { return residual_ms_; }
   // Learned latency of a scan arrival after the scan's step-0 time [ms].
   double latency_ms() const { return latency_ms_; }
-  // Round trip of the TM requests, mean [ms].
+  // Round trip of the best TM request [ms].
   double tm_round_trip_ms() const { return tm_rtt_ms_; }
 
  private:
@@ -90,17 +92,18 @@ class ClockSync {
   bool synced_ = false;
   // host_us = host_ref_us_ + us_per_ms_ * (sensor_ms - sensor_ref_ms_)
   double sensor_ref_ms_ = 0.0, host_ref_us_ = 0.0, us_per_ms_ = 1000.0;
-  double tm_sum_offset_ = 0.0, tm_rtt_sum_ = 0.0, tm_first_ms_ = 0.0;
+  double tm_best_ms_ = 0.0, tm_best_us_ = 0.0;  // the TM reading with the shortest round trip
   int tm_count_ = 0;
   double tm_rtt_ms_ = 0.0;
-  double min_delay_us_ = 0.0;  // smallest arrival - TM estimate while learning the latency
-  bool latency_known_ = false;
+  double min_delay_us_ = 0.0;  // smallest arrival - TM estimate of the first scans
+  bool have_tm_ = false;
   double latency_ms_ = 0.0;
   struct Sample {
     double sensor_ms;
-    double host_us;  // arrival - latency
+    double host_us;  // arrival
   };
-  std::deque<Sample> window_;
+  std::vector<Sample> first_;  // the first latency_scans arrivals after TM
+  std::deque<Sample> window_;  // the drift filter's arrivals
   double residual_ms_ = 0.0;
 };
 
