@@ -36,6 +36,10 @@ TEST(ProgramsEdge, EveryProgramAnswersHelpPrintConfigAndRejectsABadOption) {
   TempDir dir;
   const std::vector<std::string> programs = Programs();
   ASSERT_GE(programs.size(), 11u) << "build the programs first (" << BinDir() << ")";
+  // Programs that must be there (a program missing from the build is not silently skipped).
+  for (const char* p : {"fl-urg-driver", "fl-urg-emulator"}) {
+    EXPECT_NE(std::find(programs.begin(), programs.end(), p), programs.end()) << p << " not built";
+  }
   for (const auto& p : programs) {
     const std::string bin = BinDir() + "/" + p;
     const auto help = RunCommand(bin + " --help", dir);
