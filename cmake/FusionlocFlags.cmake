@@ -46,9 +46,11 @@ function(fl_executable name)
   fl_target_flags(fl-${name})
 endfunction()
 
-# fl_test(<name> SOURCES ... LIBS ... [LABELS ...]): a GoogleTest binary registered with ctest.
+# fl_test(<name> SOURCES ... LIBS ... [LABELS ...] [SERIAL]): a GoogleTest binary registered with
+# ctest. SERIAL: its tests run alone (ctest RUN_SERIAL), for live multi-process runs whose
+# accuracy must not depend on what else the machine is running.
 function(fl_test name)
-  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "SERIAL" "TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
   target_compile_definitions(${name} PRIVATE
@@ -57,7 +59,12 @@ function(fl_test name)
     FL_SHARED_DATA_DIR="${FL_SHARED_DATA_DIR}")
   set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/tests)
   fl_target_flags(${name})
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+  if(ARG_SERIAL)
+    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}"
+                         RUN_SERIAL TRUE)
+  else()
+    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+  endif()
 endfunction()
 
 # fl_add_subdirectories(): adds every sub-folder of the current folder that has a

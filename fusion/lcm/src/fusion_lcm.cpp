@@ -3,10 +3,15 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/log.hpp"
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/maps/map_export.hpp"
 #include "fusionloc/status_t.hpp"
@@ -65,6 +70,10 @@ void FusionNodeOptions::AddFlags(CommandLine* cli) {
                "prefix of the saved 3D map: PREFIX.pcd and PREFIX_top.png ('' = don't save)");
   cli->AddFlag("sync-full-solve", &sync_full_solve,
                "run full solves inline (always the case when replaying a log)");
+  cli->AddFlag("state-file", &state_file,
+               "live: keep the map frame's offset from the RBPF's world in this file, and go on "
+               "from it when started again within --state-max-age-s (a respawn after a crash)");
+  cli->AddFlag("state-max-age-s", &state_max_age_s, "[s] oldest state file that is used");
 }
 
 std::vector<ChannelSpec> FusionNode::Inputs() {
@@ -123,6 +132,7 @@ FusionNode::FusionNode(const FusionProcessConfig& config, const FusionNodeOption
         have_camera_to_base_ = true;
       });
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_rbpf_pose_);
+  LoadState();
   if (!async_ && lcm->replaying()) FL_LOG(INFO) << "replaying a log: full solves inline";
 }
 
@@ -165,7 +175,9 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   status_.CountIn();
   const auto t0 = std::chrono::steady_clock::now();
   const Eigen::Isometry3d T = IsometryFromArrays(m.pos, m.orientation);
-  const Status s = fusion_.AddLaserPose(m.utime, Pose2::FromIsometry3(T));
+  last_rbpf_pose_ = Pose2::FromIsometry3(T);
+  last_rbpf_utime_ = m.utime;
+  const Status s = fusion_.AddLaserPose(m.utime, T_map_rbpf_ * last_rbpf_pose_);
   if (!s.ok()) {
     status_.CountDropped(s.message());
     return;
@@ -257,6 +269,83 @@ void FusionNode::PublishPose() {
   msg.num_factors = fusion_.num_factors();
   lcm_->Publish(ch_pose_, msg, p.utime);
   status_.CountOut();
+  SaveState(p.utime, p.T_map_base);
+}
+
+std::string FormatFusionState(Utime utime, const Pose2& T_map_rbpf) {
+  std::ostringstream out;
+  out << "fusionloc-fusion-state 1\nutime " << utime << "\nT_map_rbpf "
+      << FormatDouble(T_map_rbpf.x) << " " << FormatDouble(T_map_rbpf.y) << " "
+      << FormatDouble(T_map_rbpf.theta) << "\n";
+  return out.str();
+}
+
+bool ParseFusionState(const std::string& text, Utime* utime, Pose2* T_map_rbpf,
+                      std::string* error) {
+  std::istringstream in(text);
+  std::string magic, key_utime, key_T;
+  int version = 0;
+  double x = 0, y = 0, theta = 0;
+  if (!(in >> magic >> version) || magic != "fusionloc-fusion-state" || version != 1) {
+    *error = "not a fusion state file (expected 'fusionloc-fusion-state 1' first)";
+    return false;
+  }
+  if (!(in >> key_utime >> *utime) || key_utime != "utime" || !(in >> key_T >> x >> y >> theta) ||
+      key_T != "T_map_rbpf" || !std::isfinite(x) || !std::isfinite(y) || !std::isfinite(theta)) {
+    *error = "malformed: expected 'utime U' and 'T_map_rbpf X Y THETA' with finite numbers";
+    return false;
+  }
+  *T_map_rbpf = Pose2(x, y, WrapAngle(theta));
+  return true;
+}
+
+void FusionNode::LoadState() {
+  const std::string& path = node_options_.state_file;
+  if (path.empty() || lcm_->replaying()) return;
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) return;  // a first start
+  const auto age =
+      std::filesystem::file_time_type::clock::now() - std::filesystem::last_write_time(path, ec);
+  const double age_s = std::chrono::duration<double>(age).count();
+  if (ec || age_s > node_options_.state_max_age_s) {
+    FL_LOG(INFO) << "state file " << path << " is " << static_cast<int>(age_s)
+                 << " s old (limit --state-max-age-s " << node_options_.state_max_age_s
+                 << "): starting a new map frame";
+    return;
+  }
+  std::ifstream in(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  Utime utime = 0;
+  Pose2 T;
+  std::string error;
+  if (!ParseFusionState(text.str(), &utime, &T, &error)) {
+    FL_LOG(WARN) << "state file " << path << ": " << error << "; starting a new map frame";
+    return;
+  }
+  T_map_rbpf_ = T;
+  FL_LOG(INFO) << "going on in the map frame of " << path << " (" << age_s << " s old, utime "
+               << utime << "): T_map_rbpf x " << T.x << " y " << T.y << " theta " << T.theta;
+  status_.Set("resumed_from_state", 1.0);
+}
+
+void FusionNode::SaveState(Utime utime, const Pose2& T_map_base) {
+  const std::string& path = node_options_.state_file;
+  if (path.empty() || lcm_->replaying() || utime != last_rbpf_utime_) return;
+  if (last_state_utime_ != 0 && UtimeToSeconds(utime - last_state_utime_) < 0.5) return;
+  last_state_utime_ = utime;
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::trunc);
+    out << FormatFusionState(utime, T_map_base * last_rbpf_pose_.inverse());
+    if (!out) {
+      bad_factor_warning_.Warn("cannot write the state file " + tmp + " (check the folder)");
+      return;
+    }
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    bad_factor_warning_.Warn("cannot rename " + tmp + " to " + path);
+  }
 }
 
 void FusionNode::PublishTrajectory(Utime utime) {

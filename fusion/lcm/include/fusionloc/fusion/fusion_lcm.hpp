@@ -37,6 +37,13 @@ fusionloc::trajectory_t TrajectoryToLcm(const std::vector<TrajectoryPoint>& traj
 struct FusionNodeOptions {
   std::string map_out = "out/fusion/map";  // prefix of the saved map: .pcd and _top.png ("": none)
   bool sync_full_solve = false;            // full solves inline (always so replaying a log)
+  // Live only: the file where the fusion keeps where its map frame lies relative to the
+  // RBPF's world (T_map_rbpf, from its latest fused pose), written every 0.5 s of data time.
+  // A fusion started again (respawned after a crash) reads it if it is younger than
+  // state_max_age_s and goes on in the same map frame, at the accuracy it had, instead of
+  // restarting from the RBPF's drifted pose. "" = none.
+  std::string state_file;
+  double state_max_age_s = 30.0;  // [s] wall-clock age of a usable state file
 
   void AddFlags(CommandLine* cli);
 };
@@ -69,13 +76,17 @@ class FusionNode : public LcmNode {
   void StartFullSolve();
   void FinishFullSolve();
   void SaveMap();
+  // The state file (FusionNodeOptions::state_file).
+  void LoadState();
+  void SaveState(Utime utime, const Pose2& T_map_base);
 
   FusionProcessConfig config_;
   FusionNodeOptions node_options_;
   LcmInterface* lcm_;
   bool async_;
   bool with_time_;  // wall-clock times in what is published (live only)
-  std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_camera_to_base_, ch_pose_, ch_trajectory_, ch_map_;
+  std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_camera_to_base_, ch_pose_, ch_trajectory_,
+      ch_map_;
   FactorGraphFusion fusion_;
   PointMap map_;
   StatusReporter status_;
@@ -87,6 +98,15 @@ class FusionNode : public LcmNode {
   Utime last_utime_ = 0;
   Utime last_trajectory_utime_ = 0;
   RateLimitedWarning bad_factor_warning_;
+  Pose2 T_map_rbpf_;      // applied to every RBPF pose (identity unless a state was read)
+  Pose2 last_rbpf_pose_;  // the latest RBPF pose as received, and its time
+  Utime last_rbpf_utime_ = 0;
+  Utime last_state_utime_ = 0;
 };
+
+// The state file's text: "fusionloc-fusion-state 1", "utime U", "T_map_rbpf X Y THETA".
+std::string FormatFusionState(Utime utime, const Pose2& T_map_rbpf);
+// Parses it; false with `error` naming what is wrong.
+bool ParseFusionState(const std::string& text, Utime* utime, Pose2* T_map_rbpf, std::string* error);
 
 }  // namespace fl::fusion
