@@ -85,4 +85,23 @@ TEST(UrgPrograms, ConfigFilesHoldTheDefaults) {
   }
 }
 
+// With no port and no USB Hokuyo (none on the build machines) it waits for one, says so once,
+// and stops cleanly on SIGINT.
+TEST(UrgPrograms, AutoDiscoveryWaitsForASensorAndStopsOnSigint) {
+  TempDir dir;
+  const auto r = RunCommand("{ " + BinDir() +
+                                "/fl-urg-driver --lcm-url memq:// & pid=$!; sleep 1.5; kill -INT "
+                                "$pid; for i in $(seq 50); do kill -0 $pid 2>/dev/null || break; "
+                                "sleep 0.1; done; kill -KILL $pid 2>/dev/null; wait $pid; }",
+                            dir);
+  EXPECT_EQ(r.status, 0) << r.err;
+  const size_t first = r.err.find("; waiting");
+  ASSERT_NE(first, std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("; waiting", first + 1), std::string::npos) << "said more than once:\n"
+                                                                   << r.err;
+  EXPECT_TRUE(r.err.find("no USB Hokuyo (vendor id 15d1) found") != std::string::npos ||
+              r.err.find("cannot look for a USB Hokuyo") != std::string::npos)
+      << r.err;
+}
+
 }  // namespace

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/urg/usb_discovery.hpp"
 
 namespace fl::urg {
@@ -156,9 +157,10 @@ Status UrgDriver::Start(double give_up_s) {
     // With a port given, the first failure is the user's to fix; auto-discovery waits for a
     // sensor to be plugged in.
     if (!options_.port.empty() || path.size() > 0 || MonotonicUtime() >= deadline) return s;
-    if (stop_) return s;
+    // SIGINT/SIGTERM while waiting for a sensor: a clean stop, with nothing started.
+    if (stop_ || ShutdownRequested()) return Status::Ok();
+    if (s.message() != stats().last_error) FL_LOG(INFO) << s.message() << "; waiting";
     SetError(s.message());
-    FL_LOG(INFO) << s.message() << "; waiting";
     UsbWatcher watcher;
     watcher.WaitForChange(static_cast<int>(options_.reconnect_interval_s * 1000));
   }
