@@ -241,7 +241,7 @@ TEST(BaseDriverProgram, DriverRunsAgainstTheEmulatorProgram) {
   const std::string robot = fl::test::SourceDir() + "/config/robot/turtlebot2.yaml";
   const auto r = RunCommand(
       "{ " + BinDir() + "/fl-base-emulator --duration 3 --link kobuki > emu.out 2> emu.err & " +
-          "sleep 0.5; timeout --preserve-status -s INT 1.5 " + BinDir() +
+          "sleep 0.5; timeout --foreground --preserve-status -s INT 1.5 " + BinDir() +
           "/fl-base-driver --lcm-url memq:// --robot " + robot +
           " --port kobuki; echo rc=$?; wait; }",
       dir);

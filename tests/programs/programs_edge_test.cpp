@@ -188,7 +188,7 @@ TEST(ProgramsEdge, ALiveProcessSaysWhenItsInputIsSilent) {
   std::string cmd;
   for (const char* p : kProcesses) {
     const std::string extra = std::string(p) == "fl-fusion" ? " --map-out ''" : "";
-    cmd += "(timeout --preserve-status -s INT 4 " + BinDir() + "/" + p +
+    cmd += "(timeout --foreground --preserve-status -s INT 4 " + BinDir() + "/" + p +
            " --lcm-url memq:// --input-timeout-s 0.3" + extra + " 2> " + p + ".err; echo $? > " +
            p + ".rc) & ";
   }

@@ -176,7 +176,11 @@ int LcmProcess::Run(const MakeNode& make_node) const {
     watch.Watch(ch, node.get());
     required += (required.empty() ? "" : ", ") + ch;
   }
-  FL_LOG(INFO) << "listening on " << required << " (" << lcm->url() << ")";
+  if (required.empty()) {
+    FL_LOG(INFO) << "running on " << lcm->url() << " (no inputs)";
+  } else {
+    FL_LOG(INFO) << "listening on " << required << " (" << lcm->url() << ")";
+  }
   SpinNodes(lcm.get(), {node.get()}, &watch);
   const std::string summary = node->Summary();
   if (!summary.empty()) FL_LOG(INFO) << summary;
