@@ -15,6 +15,14 @@
 namespace fl::test {
 
 inline std::string SourceDir() { return FL_SOURCE_DIR; }
+
+// A text file's whole content ("" if it cannot be read).
+inline std::string ReadFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
 inline std::string BinaryDir() { return FL_BINARY_DIR; }
 inline std::string BinDir() { return std::string(FL_BINARY_DIR) + "/bin"; }
 inline std::string SharedDataDir() { return FL_SHARED_DATA_DIR; }

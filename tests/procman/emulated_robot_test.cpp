@@ -18,12 +18,7 @@
 
 namespace {
 
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using fl::test::ReadFile;
 
 TEST(EmulatedRobot, ThreeDriversUnderOneDeputyGiveFusedPoses) {
   const std::string url = "udpm://239.255.76.67:" + std::to_string(7300 + getpid() % 200) +

@@ -22,12 +22,7 @@ namespace {
 using fl::test::BinDir;
 using fl::test::TempDir;
 
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using fl::test::ReadFile;
 
 int Sh(const std::string& command) {
   const int raw = std::system((command + " > /dev/null 2>&1").c_str());

@@ -55,7 +55,7 @@ TEST(ShellWords, VariablesFromVarsThenEnvironment) {
   unsetenv("FL_SHELL_WORDS_TEST");
 }
 
-TEST(ShellWords, ErrorsSayWhereAndWhatToDo) {
+TEST(ShellWords, ErrorsSayWhereAndTheFix) {
   EXPECT_NE(ErrorOf("sh -c 'oops").find("unterminated single quote at column 7"),
             std::string::npos);
   EXPECT_NE(ErrorOf("echo \"oops").find("unterminated double quote at column 6"),

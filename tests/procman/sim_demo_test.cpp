@@ -21,12 +21,7 @@
 
 namespace {
 
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using fl::test::ReadFile;
 
 TEST(ProcmanSimDemo, RealProcessesOverLiveLcmProduceFusedPoses) {
   const std::string url = "udpm://239.255.76.67:" + std::to_string(7500 + getpid() % 200) +

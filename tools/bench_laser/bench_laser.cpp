@@ -26,6 +26,7 @@
 
 #include "bot_core/planar_lidar_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
@@ -222,7 +223,7 @@ LogData SimulateWorld(fl::sim::SimOptions so) {
     if (f.laser_to_base && !have_mounting) {  // as fl-rbpf-slam reads LASER_TO_BASE
       have_mounting = true;
       d.T_base_laser = fl::Pose2::FromIsometry3(
-          fl::IsometryFromArrays(f.laser_to_base->trans, f.laser_to_base->quat));
+          fl::TransformFromLcm(*f.laser_to_base));
     }
     d.ground_truth.push_back({f.utime, f.T_world_base.ToIsometry3()});
     (void)d.odom.Add(f.utime, f.T_odom_base);

@@ -73,7 +73,7 @@ struct RefitResult {
 // beam geometry (beams over icp's grid max range, NaN, inf and <= 0 are ignored). Throws
 // std::invalid_argument for bad options or fewer than 2 scans.
 RefitResult RefitReference(const std::vector<RefitScan>& scans, const fl::Pose2& T_base_laser,
-                           const RbpfSlamOptions& options, const RefitOdometrySigma& odometry_sigma,
+                           const RbpfSlamOptions& options, const RefitOdometrySigma& sigma,
                            const RefitOptions& refit);
 
 }  // namespace fl::rbpf

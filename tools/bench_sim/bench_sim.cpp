@@ -18,6 +18,7 @@
 #include <optional>
 #include <sstream>
 
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/program.hpp"
 #include "fusionloc/common/yaml_options.hpp"
@@ -94,7 +95,7 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
       rbpf.emplace(rbpf_options_in);
       if (f.laser_to_base) {  // as fl-rbpf-slam reads LASER_TO_BASE
         const fl::Status s = rbpf->SetBaseLaser(fl::Pose2::FromIsometry3(
-            fl::IsometryFromArrays(f.laser_to_base->trans, f.laser_to_base->quat)));
+            fl::TransformFromLcm(*f.laser_to_base)));
         if (!s.ok()) throw std::runtime_error(s.message());
       }
     }

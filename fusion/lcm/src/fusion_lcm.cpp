@@ -8,6 +8,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/log.hpp"
@@ -128,7 +129,7 @@ FusionNode::FusionNode(const FusionProcessConfig& config, const FusionNodeOption
       ch_points_, [this](const fusionloc::point_cloud_t& m, const std::string&) { OnPoints(m); });
   lcm_->Subscribe<bot_core::rigid_transform_t>(
       ch_camera_to_base_, [this](const bot_core::rigid_transform_t& m, const std::string&) {
-        T_base_camera_ = IsometryFromArrays(m.trans, m.quat);
+        T_base_camera_ = TransformFromLcm(m);
         have_camera_to_base_ = true;
       });
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_rbpf_pose_);
@@ -339,12 +340,12 @@ void FusionNode::SaveState(Utime utime, const Pose2& T_map_base) {
     std::ofstream out(tmp, std::ios::trunc);
     out << FormatFusionState(utime, T_map_base * last_rbpf_pose_.inverse());
     if (!out) {
-      bad_factor_warning_.Warn("cannot write the state file " + tmp + " (check the folder)");
+      state_warning_.Warn("cannot write the state file " + tmp + " (check the folder)");
       return;
     }
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    bad_factor_warning_.Warn("cannot rename " + tmp + " to " + path);
+    state_warning_.Warn("cannot rename " + tmp + " to " + path);
   }
 }
 

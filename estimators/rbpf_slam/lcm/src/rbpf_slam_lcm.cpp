@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/status_t.hpp"
@@ -201,7 +202,7 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
       status_(lcm, kProgram) {
   lcm_->Subscribe<bot_core::rigid_transform_t>(
       ch_laser_to_base_, [this](const bot_core::rigid_transform_t& m, const std::string&) {
-        OnLaserToBase(Pose2::FromIsometry3(IsometryFromArrays(m.trans, m.quat)));
+        OnLaserToBase(Pose2::FromIsometry3(TransformFromLcm(m)));
       });
   lcm_->Subscribe<bot_core::planar_lidar_t>(
       ch_laser_, [this](const bot_core::planar_lidar_t& m, const std::string&) { OnLaser(m); });

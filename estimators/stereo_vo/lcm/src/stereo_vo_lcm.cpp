@@ -3,6 +3,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/log.hpp"
@@ -82,7 +83,7 @@ StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg,
   c.width = msg.width;
   c.height = msg.height;
   c.rectified = msg.rectified;
-  c.T_base_camera = fl::IsometryFromArrays(camera_to_base.trans, camera_to_base.quat);
+  c.T_base_camera = fl::TransformFromLcm(camera_to_base);
   return c;
 }
 

@@ -98,6 +98,7 @@ class FusionNode : public LcmNode {
   Utime last_utime_ = 0;
   Utime last_trajectory_utime_ = 0;
   RateLimitedWarning bad_factor_warning_;
+  RateLimitedWarning state_warning_;  // the state file cannot be written
   Pose2 T_map_rbpf_;      // applied to every RBPF pose (identity unless a state was read)
   Pose2 last_rbpf_pose_;  // the latest RBPF pose as received, and its time
   Utime last_rbpf_utime_ = 0;
