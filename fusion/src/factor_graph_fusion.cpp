@@ -208,6 +208,8 @@ FactorGraphFusion::FactorGraphFusion(const FusionOptions& options)
 }
 
 FactorGraphFusion::~FactorGraphFusion() = default;
+FactorGraphFusion::FactorGraphFusion(FactorGraphFusion&&) noexcept = default;
+FactorGraphFusion& FactorGraphFusion::operator=(FactorGraphFusion&&) noexcept = default;
 
 Status FactorGraphFusion::Reject(int64_t* counter, const std::string& message) {
   ++*counter;

@@ -64,6 +64,8 @@ PointMap::PointMap(const PointMapOptions& options) : impl_(new Impl), options_(o
 }
 
 PointMap::~PointMap() = default;
+PointMap::PointMap(PointMap&&) noexcept = default;
+PointMap& PointMap::operator=(PointMap&&) noexcept = default;
 
 Status PointMap::AddKeyframe(Utime utime, const std::vector<Eigen::Vector3f>& points_base) {
   if (impl_->keyframes.count(utime)) {

@@ -1,8 +1,11 @@
-// FusionNode's state file: a respawned fusion goes on in the map frame it had.
+// FusionNode's journal: a respawned fusion replays the inputs it had taken and goes on with
+// the same graph, in the same map frame.
 #include "fusionloc/fusion/fusion_lcm.hpp"
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <vector>
@@ -14,80 +17,151 @@
 namespace fl::fusion {
 namespace {
 
-bot_core::pose_t RbpfPose(Utime utime, const Pose2& T) {
-  bot_core::pose_t m{};
-  m.utime = utime;
-  IsometryToArrays(T.ToIsometry3(), m.pos, m.orientation);
-  return m;
+constexpr int kSteps = 40;  // 4 s at 10 Hz
+
+Utime StepTime(int k, Utime offset) { return offset + 1000000 + 100000 * static_cast<Utime>(k); }
+
+// The robot's true pose at step k: a gentle left arc.
+Pose2 TruePose(int k) {
+  const double s = 0.1 * k;
+  return Pose2(s, 0.02 * s * s, 0.04 * s);
 }
 
-// Runs a live (memq://) FusionNode with `state_file` over RBPF poses; returns its fused poses.
-std::vector<fusionloc::fused_pose_t> RunFusion(const std::string& state_file,
-                                               const std::vector<Pose2>& rbpf) {
+// The RBPF's pose: the truth plus a drift that grows (what a respawned fusion without its
+// graph would fall back to).
+Pose2 RbpfPose(int k) { return TruePose(k) * Pose2(0.01 * k, 0.005 * k, 0.004 * k); }
+
+struct FusionRun {
+  std::vector<fusionloc::fused_pose_t> poses;
+  std::vector<fusionloc::trajectory_t> trajectories;
+};
+
+// Runs a live (memq://) FusionNode with `journal` over steps [first, last): exact wheel
+// odometry and the drifting RBPF poses. With `finish` the node finishes (a clean stop);
+// without, it is destroyed as a kill -9 would leave it (the journal is flushed per input).
+// `offset` [us] shifts every time (another run).
+FusionRun RunFusion(const std::string& journal, int first, int last, bool finish, Utime offset = 0) {
   auto lcm = MakeLcm("memq://");
-  std::vector<fusionloc::fused_pose_t> fused;
+  FusionRun run;
   lcm->Subscribe<fusionloc::fused_pose_t>(
       channels::kFusedPose,
-      [&](const fusionloc::fused_pose_t& m, const std::string&) { fused.push_back(m); });
+      [&](const fusionloc::fused_pose_t& m, const std::string&) { run.poses.push_back(m); });
+  lcm->Subscribe<fusionloc::trajectory_t>(
+      channels::kFusedTrajectory,
+      [&](const fusionloc::trajectory_t& m, const std::string&) { run.trajectories.push_back(m); });
   FusionNodeOptions options;
   options.map_out = "";
   options.sync_full_solve = true;
-  options.state_file = state_file;
+  options.journal = journal;
   FusionNode node(FusionProcessConfig(), options, lcm.get(), ChannelMap());
-  for (size_t k = 0; k < rbpf.size(); ++k) {
-    lcm->Publish(channels::kRbpfPose, RbpfPose(1000000 + 1000000 * static_cast<Utime>(k), rbpf[k]),
-                 0);
+  for (int k = first; k < last; ++k) {
+    fusionloc::wheel_odometry_t odom{};
+    odom.utime = StepTime(k, offset);
+    odom.x = TruePose(k).x;
+    odom.y = TruePose(k).y;
+    odom.theta = TruePose(k).theta;
+    lcm->Publish(channels::kOdometry, odom, odom.utime);
+    bot_core::pose_t pose{};
+    pose.utime = StepTime(k, offset);
+    IsometryToArrays(RbpfPose(k).ToIsometry3(), pose.pos, pose.orientation);
+    lcm->Publish(channels::kRbpfPose, pose, pose.utime);
     while (lcm->HandleSubscriptions(0) > 0) {
     }
   }
-  return fused;
+  if (finish) {
+    node.Finish();
+    while (lcm->HandleSubscriptions(0) > 0) {
+    }
+  }
+  return run;
 }
 
-TEST(FusionNodeState, FormatAndParse) {
-  Utime utime = 0;
-  Pose2 T;
-  std::string error;
-  ASSERT_TRUE(ParseFusionState(FormatFusionState(42, Pose2(1.5, -2, 0.25)), &utime, &T, &error));
-  EXPECT_EQ(utime, 42);
-  EXPECT_EQ(T.x, 1.5);
-  EXPECT_EQ(T.y, -2);
-  EXPECT_EQ(T.theta, 0.25);
-  EXPECT_FALSE(ParseFusionState("hello", &utime, &T, &error));
-  EXPECT_NE(error.find("not a fusion state file"), std::string::npos);
-  EXPECT_FALSE(ParseFusionState("fusionloc-fusion-state 1\nutime 3\nT_map_rbpf 1 nan 0\n", &utime,
-                                &T, &error));
-  EXPECT_NE(error.find("finite"), std::string::npos);
+double Distance(const fusionloc::fused_pose_t& m, const Pose2& T) {
+  return std::hypot(m.x - T.x, m.y - T.y);
 }
 
-TEST(FusionNodeState, ARespawnedFusionGoesOnInItsMapFrame) {
+TEST(FusionNodeJournal, ARespawnedFusionGoesOnWithItsGraph) {
   test::TempDir dir;
-  const std::string state = dir.file("fusion.state");
-  const std::vector<Pose2> rbpf = {Pose2(0, 0, 0), Pose2(1, 0, 0), Pose2(2, 0, 0.1)};
-  // A first start: no state, the map frame is the RBPF's world; the state is written.
-  std::vector<fusionloc::fused_pose_t> fused = RunFusion(state, rbpf);
-  ASSERT_EQ(fused.size(), 3u);
-  EXPECT_NEAR(fused.back().x, 2.0, 1e-9);
-  ASSERT_TRUE(std::filesystem::exists(state));
+  // Undisturbed: the fused poses follow the odometry, not the drifting RBPF.
+  const FusionRun calm = RunFusion("", 0, kSteps, true);
+  ASSERT_EQ(calm.poses.size(), static_cast<size_t>(kSteps));
+  EXPECT_LT(Distance(calm.poses.back(), TruePose(kSteps - 1)), 1e-3);
+  EXPECT_GT(Distance(calm.poses.back(), RbpfPose(kSteps - 1)), 0.3);
 
-  // A respawn finds a state whose map frame is 1 m ahead and turned by 0.5 rad.
-  std::ofstream(state) << FormatFusionState(1000000, Pose2(1, 0, 0.5));
-  fused = RunFusion(state, {Pose2(2, 0, 0)});
-  ASSERT_EQ(fused.size(), 1u);
-  EXPECT_NEAR(fused[0].x, 1 + 2 * std::cos(0.5), 1e-9);
-  EXPECT_NEAR(fused[0].y, 2 * std::sin(0.5), 1e-9);
-  EXPECT_NEAR(fused[0].theta, 0.5, 1e-9);
+  // Killed after 20 steps, then started again with the same journal: the first fused pose
+  // after the respawn is where the undisturbed run was, not the RBPF's drifted pose, and the
+  // final trajectory is the undisturbed one.
+  const std::string journal = dir.file("fusion.journal");
+  const FusionRun before = RunFusion(journal, 0, 20, false);
+  EXPECT_EQ(before.poses.size(), 20u);
+  ASSERT_TRUE(std::filesystem::exists(journal));
+  const FusionRun after = RunFusion(journal, 20, kSteps, true);
+  ASSERT_EQ(after.poses.size(), static_cast<size_t>(kSteps - 20));
+  EXPECT_LT(Distance(after.poses.front(), TruePose(20)), 1e-3);
+  EXPECT_LT(Distance(after.poses.back(), TruePose(kSteps - 1)), 1e-3);
+  EXPECT_GE(after.poses.back().num_nodes, kSteps);
+  ASSERT_FALSE(calm.trajectories.empty());
+  ASSERT_FALSE(after.trajectories.empty());
+  const auto& a = calm.trajectories.back();
+  const auto& b = after.trajectories.back();
+  ASSERT_EQ(a.num_poses, b.num_poses);
+  for (int i = 0; i < a.num_poses; ++i) {
+    EXPECT_EQ(a.utimes[i], b.utimes[i]);
+    EXPECT_NEAR(a.x[i], b.x[i], 1e-4) << i;
+    EXPECT_NEAR(a.y[i], b.y[i], 1e-4) << i;
+    EXPECT_NEAR(a.theta[i], b.theta[i], 1e-4) << i;
+  }
 
-  // A state older than state_max_age_s (yesterday's run) is not used; nor is a malformed one.
-  std::ofstream(state) << FormatFusionState(1000000, Pose2(1, 0, 0.5));
+  // Without a journal the respawned fusion starts a new graph at the RBPF's pose.
+  const FusionRun fresh = RunFusion("", 20, kSteps, true);
+  ASSERT_FALSE(fresh.poses.empty());
+  EXPECT_LT(Distance(fresh.poses.front(), RbpfPose(20)), 1e-6);
+}
+
+TEST(FusionNodeJournal, ADamagedTailIsDroppedAndTheRestIsUsed) {
+  test::TempDir dir;
+  const std::string journal = dir.file("fusion.journal");
+  RunFusion(journal, 0, 20, false);
+  // A kill in the middle of a write: half an event at the end.
+  const auto size = std::filesystem::file_size(journal);
+  { std::ofstream(journal, std::ios::app) << std::string("\xED\xA1\xDA\x01\x00\x00", 6); }
+  const FusionRun after = RunFusion(journal, 20, kSteps, true);
+  ASSERT_FALSE(after.poses.empty());
+  EXPECT_LT(Distance(after.poses.front(), TruePose(20)), 1e-3);
+  // The journal was rewritten from its whole events and then appended to.
+  EXPECT_GT(std::filesystem::file_size(journal), size);
+  LcmLogReader reader(journal);
+  LcmLogEvent e;
+  int events = 0;
+  while (reader.Next(&e)) ++events;
+  EXPECT_EQ(reader.ProblemSummary(), "");
+  EXPECT_EQ(events, 2 * kSteps);  // ODOMETRY and RBPF_POSE per step
+}
+
+TEST(FusionNodeJournal, AnOldJournalOrAnotherRunsStartsANewGraph) {
+  test::TempDir dir;
+  const std::string journal = dir.file("fusion.journal");
+  // Yesterday's journal (older than journal_max_age_s) is not replayed.
+  RunFusion(journal, 0, 20, false);
   std::filesystem::last_write_time(
-      state, std::filesystem::file_time_type::clock::now() - std::chrono::hours(1));
-  fused = RunFusion(state, {Pose2(2, 0, 0)});
-  ASSERT_EQ(fused.size(), 1u);
-  EXPECT_NEAR(fused[0].x, 2.0, 1e-9);
-  std::ofstream(state) << "garbage";
-  fused = RunFusion(state, {Pose2(2, 0, 0)});
-  ASSERT_EQ(fused.size(), 1u);
-  EXPECT_NEAR(fused[0].x, 2.0, 1e-9);
+      journal, std::filesystem::file_time_type::clock::now() - std::chrono::hours(1));
+  FusionRun after = RunFusion(journal, 20, kSteps, true);
+  ASSERT_FALSE(after.poses.empty());
+  EXPECT_LT(Distance(after.poses.front(), RbpfPose(20)), 1e-6);
+  EXPECT_EQ(after.poses.front().num_nodes, 1);
+  // A journal whose data lies ahead of the live data (another run in the same folder) is set
+  // aside at the first live pose.
+  RunFusion(journal, 0, kSteps, false, /*offset=*/100000000);
+  after = RunFusion(journal, 0, 10, true);
+  ASSERT_FALSE(after.poses.empty());
+  EXPECT_LT(Distance(after.poses.front(), RbpfPose(0)), 1e-6);
+  EXPECT_EQ(after.poses.front().num_nodes, 1);
+  EXPECT_EQ(after.poses.back().num_nodes, 10);
+  // Not a log at all: a new graph, and the file is replaced by a journal.
+  std::ofstream(journal) << "garbage";
+  after = RunFusion(journal, 20, kSteps, true);
+  ASSERT_FALSE(after.poses.empty());
+  EXPECT_EQ(after.poses.front().num_nodes, 1);
 }
 
 }  // namespace

@@ -118,13 +118,12 @@ double LineTime(const std::string& log, const std::string& text) {
   return h * 3600.0 + mi * 60.0 + sec;
 }
 
-// kill -9 of the fusion while the simulated robot drives: its deputy starts it again within
-// 2 s, the fusion goes on in the map frame of its state file with the factors that arrive
-// after it, and fused poses come out to the end of the drive. The fused accuracy against the
-// same run undisturbed is printed: issue #23 asks for 1.5x, which is not met yet (1.1x to 1.7x
-// here: a respawned fusion has lost its graph, so its heading drifts like the RBPF's until the
-// next loop closure); the test does not hide that behind a wider bound.
-TEST(ProcmanSimDemo, KillMinus9OfTheFusionIsRespawnedAndGoesOnInItsMapFrame) {
+// kill -9 of each estimator and of the fusion in turn while the simulated robot drives
+// (issue #23): the deputy starts each again within 2 s; the RBPF-SLAM waits for the mounting
+// (LASER_TO_BASE, sent every second) and starts a new map, the VO a new keyframe chain, and the
+// fusion replays its journal and goes on with its graph. The fused trajectory against ground
+// truth stays within 1.5x of the same run undisturbed, and fused poses come out to the end.
+TEST(ProcmanSimDemo, KillMinus9OfEachEstimatorAndOfTheFusionKeepsTheFusedAccuracy) {
   const std::string url = "udpm://239.255.76.67:" + std::to_string(7100 + getpid() % 200) +
                           "?ttl=0&recv_buf_size=16777216";
   try {
@@ -132,7 +131,7 @@ TEST(ProcmanSimDemo, KillMinus9OfTheFusionIsRespawnedAndGoesOnInItsMapFrame) {
   } catch (const std::exception& e) {
     GTEST_SKIP() << "no UDP multicast on this machine (" << e.what() << ")";
   }
-  constexpr int kDuration = 16;  // [s] simulated (8 s of wall time)
+  constexpr int kDuration = 24;  // [s] simulated (12 s of wall time)
   fl::test::TempDir calm;
   ASSERT_EQ(std::system(DemoCommand(calm, url, kDuration).c_str()), 0)
       << ReadFile(calm.file("sheriff.out"));
@@ -145,9 +144,6 @@ TEST(ProcmanSimDemo, KillMinus9OfTheFusionIsRespawnedAndGoesOnInItsMapFrame) {
           static_cast<char*>(nullptr));
     _exit(127);
   }
-  // Three seconds into the drive, kill the fusion.
-  std::smatch m;
-  const std::regex started("started fusion \\(pid ([0-9]+)");
   const std::regex sim("started sim \\(pid");
   std::string out;
   for (int i = 0; i < 400; ++i) {
@@ -155,35 +151,49 @@ TEST(ProcmanSimDemo, KillMinus9OfTheFusionIsRespawnedAndGoesOnInItsMapFrame) {
     if (std::regex_search(out, sim)) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
-  ASSERT_TRUE(std::regex_search(out, m, started)) << out;
-  std::this_thread::sleep_for(std::chrono::seconds(3));
-  ASSERT_EQ(kill(std::stoi(m[1]), SIGKILL), 0);
+  ASSERT_TRUE(std::regex_search(out, sim)) << out;
+  // 2, 4 and 6 s of wall time into the drive (4, 8, 12 s of data), one process each.
+  const std::vector<std::string> victims = {"rbpf_slam", "stereo_vo", "fusion"};
+  for (const std::string& name : victims) {
+    std::this_thread::sleep_for(std::chrono::seconds(2));
+    out = ReadFile(hit.file("sheriff.out"));
+    std::smatch m;
+    const std::regex started("started " + name + " \\(pid ([0-9]+)");
+    ASSERT_TRUE(std::regex_search(out, m, started)) << out;
+    ASSERT_EQ(kill(std::stoi(m[1]), SIGKILL), 0) << name;
+  }
   int ws = 0;
   waitpid(sheriff, &ws, 0);
   out = ReadFile(hit.file("sheriff.out"));
   ASSERT_TRUE(WIFEXITED(ws) && WEXITSTATUS(ws) == 0) << out;
-  const double died = LineTime(out, "fusion ended (killed by SIGKILL)");
-  ASSERT_GT(died, 0) << out;
-  const double again =
-      LineTime(out.substr(out.find("fusion ended (killed by SIGKILL)")), "started fusion (pid");
-  ASSERT_GT(again, 0) << out;
-  EXPECT_LT(again - died, 2.0) << out;  // back within 2 s (the back-off starts at 10 ms)
   const std::string table = ReadFile(hit.file("processes.txt"));
-  EXPECT_NE(table.find("fusion                  localhost       2        1         0"),
-            std::string::npos)
-      << table;
+  for (const std::string& name : victims) {
+    const std::string ended = name + " ended (killed by SIGKILL)";
+    const double died = LineTime(out, ended);
+    ASSERT_GT(died, 0) << out;
+    const double again = LineTime(out.substr(out.find(ended)), "started " + name + " (pid");
+    ASSERT_GT(again, 0) << out;
+    EXPECT_LT(again - died, 2.0) << name << "\n" << out;  // the back-off starts at 10 ms
+    // Started twice, restarted once, and the second run ended cleanly.
+    EXPECT_TRUE(std::regex_search(table + "\n",
+                                  std::regex("(^|\\n)([a-z_]+/)?" + name + " +localhost +2 +1 +0[ \\n]")))
+        << table;
+  }
   const double hit_ate = FusedAte(hit);
-  std::cout << "fused ATE: undisturbed " << calm_ate << " m, fusion killed " << hit_ate << " m\n";
-  EXPECT_LT(hit_ate, 1.0) << "the fused trajectory after the respawn is lost";
-  EXPECT_NE(ReadFile(hit.file("fusion.log")).find("going on in the map frame of"),
-            std::string::npos)
-      << ReadFile(hit.file("fusion.log"));
+  std::cout << "fused ATE: undisturbed " << calm_ate << " m, estimators and fusion killed "
+            << hit_ate << " m (" << hit_ate / calm_ate << "x)\n";
+  EXPECT_LE(hit_ate, 1.5 * calm_ate) << ReadFile(hit.file("fusion.log"));
+  const std::string fusion_log = ReadFile(hit.file("fusion.log"));
+  EXPECT_NE(fusion_log.find("restored from the journal"), std::string::npos) << fusion_log;
+  const std::string rbpf_log = ReadFile(hit.file("rbpf_slam.log"));
+  EXPECT_EQ(rbpf_log.find("identity"), std::string::npos)
+      << "the respawned RBPF-SLAM did not wait for LASER_TO_BASE:\n" << rbpf_log;
   // Fused poses went on to the end of the drive, and the final trajectory was published.
   std::map<std::string, int> count;
   fl::LcmLogReader reader(hit.file("run.lcmlog"));
   fl::LcmLogEvent e;
   while (reader.Next(&e)) ++count[e.channel];
-  EXPECT_GE(count["FUSED_POSE"], count["LASER"] - 30);  // about 1 s of scans missed
+  EXPECT_GE(count["FUSED_POSE"], count["LASER"] - 40);  // about 1 s of scans missed per kill
   EXPECT_GE(count["FUSED_TRAJECTORY"], 1);
 }
 

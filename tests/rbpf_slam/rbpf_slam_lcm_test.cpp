@@ -5,6 +5,12 @@
 
 #include <cmath>
 
+#include "bot_core/rigid_transform_t.hpp"
+#include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
+#include "laser_fixtures.hpp"
+
 namespace fl::rbpf {
 namespace {
 
@@ -113,6 +119,76 @@ TEST(RbpfSlamLcm, FactorAndGridConversions) {
   TiledGrid grid{GridOptions{}};
   const auto empty = GridToLcm(5, grid);
   EXPECT_EQ(empty.num_cells, 0);
+}
+
+// A live RbpfSlamNode (memq://) fed `steps` scans at 10 Hz of a robot driving along a room's
+// wall, with LASER_TO_BASE published after `mounting_after` scans (-1: never). Returns the
+// number of RBPF_POSE after each scan and, through `log`, what the node logged.
+std::vector<int> RunNode(int steps, int mounting_after, std::string* log) {
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  auto lcm = MakeLcm("memq://");
+  int poses = 0;
+  lcm->Subscribe<bot_core::pose_t>(channels::kRbpfPose,
+                                   [&](const bot_core::pose_t&, const std::string&) { ++poses; });
+  testing::internal::CaptureStderr();
+  std::vector<int> out;
+  {
+    RbpfSlamNode node(RbpfSlamOptions(), RbpfSlamNodeOptions(), lcm.get(), ChannelMap());
+    const Pose2 T_base_laser(0.15, 0.0, 0.0);
+    for (int k = 0; k < steps; ++k) {
+      if (k == mounting_after) {
+        lcm->Publish(channels::kLaserToBase, TransformToLcm(T_base_laser.ToIsometry3(), 0), 0);
+      }
+      const Utime t = 1000000 + 100000 * static_cast<Utime>(k);
+      const Pose2 T_world_base(-8.5 + 0.05 * k, -4.5, 0.0);
+      fusionloc::wheel_odometry_t odom{};
+      odom.utime = t;
+      odom.x = T_world_base.x;
+      odom.y = T_world_base.y;
+      lcm->Publish(channels::kOdometry, odom, t);
+      bot_core::planar_lidar_t scan{};
+      scan.utime = t;
+      scan.ranges = world.Scan(T_world_base * T_base_laser, 181, -M_PI / 2, M_PI / 180, 25.0);
+      for (float& r : scan.ranges) {
+        if (!std::isfinite(r)) r = 0.0f;
+      }
+      scan.nranges = static_cast<int32_t>(scan.ranges.size());
+      scan.rad0 = static_cast<float>(-M_PI / 2);
+      scan.radstep = static_cast<float>(M_PI / 180);
+      lcm->Publish(channels::kLaser, scan, t);
+      while (lcm->HandleSubscriptions(0) > 0) {
+      }
+      node.Poll();
+      while (lcm->HandleSubscriptions(0) > 0) {
+      }
+      out.push_back(poses);
+    }
+    node.Finish();
+    while (lcm->HandleSubscriptions(0) > 0) {
+    }
+    out.push_back(poses);
+  }
+  *log = testing::internal::GetCapturedStderr();
+  return out;
+}
+
+TEST(RbpfSlamNode, TheFirstScansWaitForTheMountingAndNoneIsLost) {
+  std::string log;
+  // LASER_TO_BASE after 5 scans (a process respawned mid-run gets it within its 1 s period):
+  // nothing is published before it, then every held scan, with the mounting.
+  std::vector<int> poses = RunNode(12, 5, &log);
+  EXPECT_EQ(poses[4], 0) << log;
+  EXPECT_GE(poses[6], 5) << log;
+  EXPECT_EQ(poses.back(), 12) << log;
+  EXPECT_NE(log.find("T_base_laser from LASER_TO_BASE: x 0.15"), std::string::npos) << log;
+  EXPECT_EQ(log.find("identity"), std::string::npos) << log;
+  // Never: after mounting_wait_s (2 s of scans) the laser is taken to be at the base origin,
+  // with a warning, and no scan is lost.
+  poses = RunNode(30, -1, &log);
+  EXPECT_EQ(poses[15], 0) << log;
+  EXPECT_GE(poses[25], 20) << log;
+  EXPECT_EQ(poses.back(), 30) << log;
+  EXPECT_NE(log.find("identity T_base_laser"), std::string::npos) << log;
 }
 
 }  // namespace

@@ -403,6 +403,13 @@ void LcmLogWriter::Write(const std::string& channel, const void* data, int size,
   ++next_event_;
 }
 
+void LcmLogWriter::Flush() {
+  if (file_ && std::fflush(static_cast<FILE*>(file_)) != 0) {
+    throw std::runtime_error("write error on LCM log '" + write_path_ +
+                             "': " + std::strerror(errno) + " (disk full?)");
+  }
+}
+
 void LcmLogWriter::Close() {
   if (!file_) return;
   FILE* f = static_cast<FILE*>(file_);

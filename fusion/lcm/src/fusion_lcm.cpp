@@ -71,10 +71,11 @@ void FusionNodeOptions::AddFlags(CommandLine* cli) {
                "prefix of the saved 3D map: PREFIX.pcd and PREFIX_top.png ('' = don't save)");
   cli->AddFlag("sync-full-solve", &sync_full_solve,
                "run full solves inline (always the case when replaying a log)");
-  cli->AddFlag("state-file", &state_file,
-               "live: keep the map frame's offset from the RBPF's world in this file, and go on "
-               "from it when started again within --state-max-age-s (a respawn after a crash)");
-  cli->AddFlag("state-max-age-s", &state_max_age_s, "[s] oldest state file that is used");
+  cli->AddFlag("journal", &journal,
+               "live: record every input in this LCM log, and when started again within "
+               "--journal-max-age-s (a respawn after a crash) replay it first and go on with the "
+               "same graph and map");
+  cli->AddFlag("journal-max-age-s", &journal_max_age_s, "[s] oldest journal that is replayed");
 }
 
 std::vector<ChannelSpec> FusionNode::Inputs() {
@@ -114,27 +115,139 @@ FusionNode::FusionNode(const FusionProcessConfig& config, const FusionNodeOption
       fusion_(config.graph),
       map_(config.map),
       status_(lcm, kProgram) {
-  lcm_->Subscribe<bot_core::pose_t>(
-      ch_rbpf_pose_, [this](const bot_core::pose_t& m, const std::string&) { OnLaserPose(m); });
+  Handle<bot_core::pose_t>(ch_rbpf_pose_, [this](const bot_core::pose_t& m) { OnLaserPose(m); });
   for (const char* ch : {channels::kRbpfFactors, channels::kVoFactors}) {
-    lcm_->Subscribe<fusionloc::relative_pose_factor_t>(
-        channels(ch), [this](const fusionloc::relative_pose_factor_t& m, const std::string& c) {
-          OnFactor(m, c);
-        });
+    const std::string channel = channels(ch);
+    Handle<fusionloc::relative_pose_factor_t>(
+        channel, [this, channel](const fusionloc::relative_pose_factor_t& m) { OnFactor(m, channel); });
   }
-  lcm_->Subscribe<fusionloc::wheel_odometry_t>(
-      ch_odometry_,
-      [this](const fusionloc::wheel_odometry_t& m, const std::string&) { OnOdometry(m); });
-  lcm_->Subscribe<fusionloc::point_cloud_t>(
-      ch_points_, [this](const fusionloc::point_cloud_t& m, const std::string&) { OnPoints(m); });
-  lcm_->Subscribe<bot_core::rigid_transform_t>(
-      ch_camera_to_base_, [this](const bot_core::rigid_transform_t& m, const std::string&) {
-        T_base_camera_ = TransformFromLcm(m);
-        have_camera_to_base_ = true;
-      });
+  Handle<fusionloc::wheel_odometry_t>(
+      ch_odometry_, [this](const fusionloc::wheel_odometry_t& m) { OnOdometry(m); });
+  Handle<fusionloc::point_cloud_t>(ch_points_,
+                                   [this](const fusionloc::point_cloud_t& m) { OnPoints(m); });
+  Handle<bot_core::rigid_transform_t>(ch_camera_to_base_,
+                                      [this](const bot_core::rigid_transform_t& m) {
+                                        T_base_camera_ = TransformFromLcm(m);
+                                        have_camera_to_base_ = true;
+                                      });
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_rbpf_pose_);
-  LoadState();
   if (!async_ && lcm->replaying()) FL_LOG(INFO) << "replaying a log: full solves inline";
+  RestoreFromJournal();
+}
+
+template <class Msg>
+void FusionNode::Handle(const std::string& channel, std::function<void(const Msg&)> handler) {
+  journal_handlers_[channel] = [handler](const void* data, int size) {
+    Msg msg;
+    if (msg.decode(data, 0, size) != size) return false;
+    handler(msg);
+    return true;
+  };
+  lcm_->Subscribe<Msg>(channel, [this, handler](const Msg& m, const std::string& ch) {
+    handler(m);
+    if (journal_writer_) {
+      const int size = m.getEncodedSize();
+      encode_buffer_.resize(static_cast<size_t>(size));
+      m.encode(encode_buffer_.data(), 0, size);
+      Record(ch, encode_buffer_.data(), size);
+    }
+  });
+}
+
+void FusionNode::RestoreFromJournal() {
+  const std::string& path = node_options_.journal;
+  if (path.empty() || lcm_->replaying()) return;
+  std::error_code ec;
+  std::vector<LcmLogEvent> events;
+  if (std::filesystem::exists(path, ec)) {
+    const auto age =
+        std::filesystem::file_time_type::clock::now() - std::filesystem::last_write_time(path, ec);
+    const double age_s = std::chrono::duration<double>(age).count();
+    if (ec || age_s > node_options_.journal_max_age_s) {
+      FL_LOG(INFO) << "journal " << path << " is " << static_cast<int>(age_s)
+                   << " s old (limit --journal-max-age-s " << node_options_.journal_max_age_s
+                   << "): starting a new graph";
+    } else {
+      try {
+        LcmLogReader reader(path);
+        LcmLogEvent e;
+        while (reader.Next(&e)) events.push_back(std::move(e));
+        if (!reader.ProblemSummary().empty()) {
+          FL_LOG(WARN) << "journal " << path << ": " << reader.ProblemSummary()
+                       << "; the " << events.size() << " whole inputs before it are used";
+        }
+      } catch (const std::exception& ex) {
+        FL_LOG(WARN) << "journal " << path << " unreadable (" << ex.what()
+                     << "): starting a new graph";
+        events.clear();
+      }
+    }
+  }
+  // The journal is written anew (its valid events first, so that a damaged tail is not kept
+  // in the middle of it) and renamed into place before anything is appended.
+  const std::string fresh = path + ".new";
+  try {
+    journal_writer_ = std::make_unique<LcmLogWriter>(fresh, /*atomic=*/false);
+    for (const LcmLogEvent& e : events) {
+      journal_writer_->Write(e.channel, e.data.data(), static_cast<int>(e.data.size()), e.utime);
+    }
+    journal_writer_->Flush();
+    if (std::rename(fresh.c_str(), path.c_str()) != 0) {
+      throw std::runtime_error("cannot rename " + fresh + " to " + path);
+    }
+  } catch (const std::exception& ex) {
+    FL_LOG(ERROR) << "journal " << path << ": " << ex.what()
+                  << "; going on without one (a respawn will start a new graph)";
+    journal_writer_.reset();
+  }
+  if (events.empty()) return;
+  const auto t0 = std::chrono::steady_clock::now();
+  restoring_ = true;
+  int64_t used = 0;
+  for (const LcmLogEvent& e : events) {
+    const auto it = journal_handlers_.find(e.channel);
+    if (it != journal_handlers_.end() && it->second(e.data.data(), static_cast<int>(e.data.size())))
+      ++used;
+  }
+  restoring_ = false;
+  if (fusion_.num_nodes() == 0) return;
+  const SolveSummary full = fusion_.FullSolve();
+  last_full_ = full;
+  restored_ = true;
+  restored_until_ = last_utime_;
+  const double ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  FL_LOG(INFO) << "restored from the journal " << path << ": " << used << " inputs, "
+               << fusion_.num_nodes() << " nodes, " << fusion_.num_factors() << " factors, "
+               << map_.num_keyframes() << " map keyframes, in " << static_cast<int>(ms)
+               << " ms; going on with the same graph (" << full.ToString() << ")";
+  status_.Set("restored_inputs", static_cast<double>(used));
+}
+
+void FusionNode::Record(const std::string& channel, const void* data, int size) {
+  try {
+    journal_writer_->Write(channel, data, size, lcm_->Now());
+    journal_writer_->Flush();
+  } catch (const std::exception& e) {
+    journal_warning_.Warn(std::string(e.what()) + "; the journal stops here");
+    journal_writer_.reset();
+  }
+}
+
+void FusionNode::Reset() {
+  fusion_ = FactorGraphFusion(config_.graph);
+  map_ = PointMap(config_.map);
+  last_utime_ = 0;
+  last_trajectory_utime_ = 0;
+  last_full_ = SolveSummary();
+  if (journal_writer_) {
+    try {
+      journal_writer_ = std::make_unique<LcmLogWriter>(node_options_.journal, /*atomic=*/false);
+    } catch (const std::exception& e) {
+      FL_LOG(ERROR) << e.what() << "; going on without a journal";
+      journal_writer_.reset();
+    }
+  }
 }
 
 FusionNode::~FusionNode() {
@@ -175,15 +288,23 @@ std::string FusionNode::Summary() const {
 void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   status_.CountIn();
   const auto t0 = std::chrono::steady_clock::now();
+  if (restored_ && !restoring_) {
+    restored_ = false;
+    if (m.utime + SecondsToUtime(5.0) < restored_until_) {
+      FL_LOG(WARN) << "the first live " << ch_rbpf_pose_ << " (utime " << m.utime
+                   << ") is older than the journal's newest node (utime " << restored_until_
+                   << "): the journal is of another run; starting a new graph";
+      Reset();
+    }
+  }
   const Eigen::Isometry3d T = IsometryFromArrays(m.pos, m.orientation);
-  last_rbpf_pose_ = Pose2::FromIsometry3(T);
-  last_rbpf_utime_ = m.utime;
-  const Status s = fusion_.AddLaserPose(m.utime, T_map_rbpf_ * last_rbpf_pose_);
+  const Status s = fusion_.AddLaserPose(m.utime, Pose2::FromIsometry3(T));
   if (!s.ok()) {
     status_.CountDropped(s.message());
     return;
   }
   last_utime_ = m.utime;
+  if (restoring_) return;  // one full solve at the end of the journal
   const SolveSummary u = fusion_.Update();
   PublishPose();
   if (fusion_.full_solve_requested() && !job_future_.valid()) StartFullSolve();
@@ -270,83 +391,6 @@ void FusionNode::PublishPose() {
   msg.num_factors = fusion_.num_factors();
   lcm_->Publish(ch_pose_, msg, p.utime);
   status_.CountOut();
-  SaveState(p.utime, p.T_map_base);
-}
-
-std::string FormatFusionState(Utime utime, const Pose2& T_map_rbpf) {
-  std::ostringstream out;
-  out << "fusionloc-fusion-state 1\nutime " << utime << "\nT_map_rbpf "
-      << FormatDouble(T_map_rbpf.x) << " " << FormatDouble(T_map_rbpf.y) << " "
-      << FormatDouble(T_map_rbpf.theta) << "\n";
-  return out.str();
-}
-
-bool ParseFusionState(const std::string& text, Utime* utime, Pose2* T_map_rbpf,
-                      std::string* error) {
-  std::istringstream in(text);
-  std::string magic, key_utime, key_T;
-  int version = 0;
-  double x = 0, y = 0, theta = 0;
-  if (!(in >> magic >> version) || magic != "fusionloc-fusion-state" || version != 1) {
-    *error = "not a fusion state file (expected 'fusionloc-fusion-state 1' first)";
-    return false;
-  }
-  if (!(in >> key_utime >> *utime) || key_utime != "utime" || !(in >> key_T >> x >> y >> theta) ||
-      key_T != "T_map_rbpf" || !std::isfinite(x) || !std::isfinite(y) || !std::isfinite(theta)) {
-    *error = "malformed: expected 'utime U' and 'T_map_rbpf X Y THETA' with finite numbers";
-    return false;
-  }
-  *T_map_rbpf = Pose2(x, y, WrapAngle(theta));
-  return true;
-}
-
-void FusionNode::LoadState() {
-  const std::string& path = node_options_.state_file;
-  if (path.empty() || lcm_->replaying()) return;
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) return;  // a first start
-  const auto age =
-      std::filesystem::file_time_type::clock::now() - std::filesystem::last_write_time(path, ec);
-  const double age_s = std::chrono::duration<double>(age).count();
-  if (ec || age_s > node_options_.state_max_age_s) {
-    FL_LOG(INFO) << "state file " << path << " is " << static_cast<int>(age_s)
-                 << " s old (limit --state-max-age-s " << node_options_.state_max_age_s
-                 << "): starting a new map frame";
-    return;
-  }
-  std::ifstream in(path);
-  std::ostringstream text;
-  text << in.rdbuf();
-  Utime utime = 0;
-  Pose2 T;
-  std::string error;
-  if (!ParseFusionState(text.str(), &utime, &T, &error)) {
-    FL_LOG(WARN) << "state file " << path << ": " << error << "; starting a new map frame";
-    return;
-  }
-  T_map_rbpf_ = T;
-  FL_LOG(INFO) << "going on in the map frame of " << path << " (" << age_s << " s old, utime "
-               << utime << "): T_map_rbpf x " << T.x << " y " << T.y << " theta " << T.theta;
-  status_.Set("resumed_from_state", 1.0);
-}
-
-void FusionNode::SaveState(Utime utime, const Pose2& T_map_base) {
-  const std::string& path = node_options_.state_file;
-  if (path.empty() || lcm_->replaying() || utime != last_rbpf_utime_) return;
-  if (last_state_utime_ != 0 && UtimeToSeconds(utime - last_state_utime_) < 0.5) return;
-  last_state_utime_ = utime;
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::trunc);
-    out << FormatFusionState(utime, T_map_base * last_rbpf_pose_.inverse());
-    if (!out) {
-      state_warning_.Warn("cannot write the state file " + tmp + " (check the folder)");
-      return;
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    state_warning_.Warn("cannot rename " + tmp + " to " + path);
-  }
 }
 
 void FusionNode::PublishTrajectory(Utime utime) {

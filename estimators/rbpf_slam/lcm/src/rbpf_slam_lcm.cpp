@@ -5,6 +5,7 @@
 
 #include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/status_t.hpp"
 #include "bot_core/rigid_transform_t.hpp"
@@ -158,12 +159,16 @@ void RbpfSlamNodeOptions::AddFlags(CommandLine* cli) {
                "how long a scan may wait for odometry at or after its time [s]");
   cli->AddFlag("no-odometry", &no_odometry,
                "run without wheel odometry (scan matching from the last pose)");
+  cli->AddFlag("mounting-wait-s", &mounting_wait_s,
+               "[s] of scan time the first scans wait for LASER_TO_BASE before the laser is "
+               "taken to be at the base origin (0: no wait)");
   cli->AddCheck([this] { return Check(); });
 }
 
 std::string RbpfSlamNodeOptions::Check() const {
   if (!(map_period_s >= 0.0)) return "--map-period-s must be >= 0";
   if (!(merge_latency_s > 0.0)) return "--merge-latency-s must be > 0";
+  if (!(mounting_wait_s >= 0.0)) return "--mounting-wait-s must be >= 0";
   return "";
 }
 
@@ -239,6 +244,7 @@ void RbpfSlamNode::OnLaserToBase(const Pose2& T) {
                  << " yaw " << T.theta;
   }
   have_laser_to_base_ = true;
+  RunHeldScans();
 }
 
 void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
@@ -256,9 +262,28 @@ void RbpfSlamNode::ProcessReady(bool flush) {
   sync_.Process(
       flush,
       [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+        if (!started_ && !have_laser_to_base_ && node_options_.mounting_wait_s > 0.0 &&
+            (held_.empty() || scan.utime - held_.front().scan.utime <
+                                  SecondsToUtime(node_options_.mounting_wait_s))) {
+          held_.push_back({scan, odom != nullptr, odom ? *odom : Pose2(), lookup});
+          if (held_.size() == 1) {
+            status_.SetState(fusionloc::status_t::LEVEL_STARTING,
+                             "waiting up to " + FormatDouble(node_options_.mounting_wait_s) +
+                                 " s for " + ch_laser_to_base_);
+          }
+          return;
+        }
+        RunHeldScans();
         RunScan(scan, odom, lookup);
       },
       [this](const std::string& w) { warn_.Warn(w); });
+  if (flush) RunHeldScans();
+}
+
+void RbpfSlamNode::RunHeldScans() {
+  std::vector<HeldScan> held;
+  held.swap(held_);
+  for (const HeldScan& h : held) RunScan(h.scan, h.has_odom ? &h.odom : nullptr, h.lookup);
 }
 
 void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const Status& lookup) {

@@ -235,6 +235,8 @@ class FactorGraphFusion {
  public:
   explicit FactorGraphFusion(const FusionOptions& options);
   ~FactorGraphFusion();
+  FactorGraphFusion(FactorGraphFusion&&) noexcept;
+  FactorGraphFusion& operator=(FactorGraphFusion&&) noexcept;
 
   // A laser-rate pose from the RBPF-SLAM (T_map_base at utime): creates a node. Times must
   // increase; the pose initialises the node (relative to the previous fused node) and

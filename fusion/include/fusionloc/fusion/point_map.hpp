@@ -37,6 +37,8 @@ class PointMap {
  public:
   explicit PointMap(const PointMapOptions& options);
   ~PointMap();
+  PointMap(PointMap&&) noexcept;
+  PointMap& operator=(PointMap&&) noexcept;
 
   // Points of one keyframe in the BASE frame at utime. Non-finite and out-of-range points are
   // dropped (counted in dropped_points()). Error if the keyframe time is already stored.

@@ -197,6 +197,9 @@ class LcmLogWriter {
     msg.encode(buffer_.data(), 0, size);
     Write(channel, buffer_.data(), size, utime);
   }
+  // Hands what was written to the kernel (it survives a kill -9 of this process, not a power
+  // loss). Throws on I/O error.
+  void Flush();
   // Flushes, closes and (if atomic) renames into place. Throws on I/O error.
   void Close();
   // Closes and deletes the partial output (use on failure).

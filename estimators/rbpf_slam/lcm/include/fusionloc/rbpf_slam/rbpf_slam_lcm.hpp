@@ -78,6 +78,10 @@ struct RbpfSlamNodeOptions {
   double map_period_s = 5.0;     // [s] of data time between RBPF_MAP messages (0: only at the end)
   double merge_latency_s = 0.3;  // [s] how long a scan may wait for odometry at or after its time
   bool no_odometry = false;      // scan matching from the last pose, without ODOMETRY
+  // [s] of scan time the first scans wait for LASER_TO_BASE (its publishers send it every
+  // second, so a process started or respawned mid-run gets it within one period); then the
+  // laser is taken to be at the base origin, with a warning. 0: no wait.
+  double mounting_wait_s = 2.0;
 
   void AddFlags(CommandLine* cli);
   std::string Check() const;  // "" or the usage error
@@ -104,6 +108,8 @@ class RbpfSlamNode : public LcmNode {
   // Runs every scan the synchronisation hands on (with flush: every scan still waiting too).
   void ProcessReady(bool flush);
   void RunScan(const LaserScan& scan, const Pose2* odom, const Status& lookup);
+  // Runs the scans held back while waiting for LASER_TO_BASE (mounting_wait_s).
+  void RunHeldScans();
   void PublishGraph(Utime utime);
 
   RbpfSlamNodeOptions node_options_;
@@ -116,6 +122,13 @@ class RbpfSlamNode : public LcmNode {
   RateLimitedWarning warn_;
   bool have_laser_to_base_ = false;
   bool started_ = false;
+  struct HeldScan {
+    LaserScan scan;
+    bool has_odom = false;
+    Pose2 odom;
+    Status lookup;
+  };
+  std::vector<HeldScan> held_;  // first scans waiting for LASER_TO_BASE
   Utime last_map_utime_ = 0, last_utime_ = 0;
 };
 
