@@ -55,7 +55,7 @@ bool TrailDecimator::Accept(const ViewPose& p, bool* restart) {
     have_last_ = false;
   }
   if (have_last_) {
-    if (UtimeToSeconds(p.utime - last_.utime) < min_period_s_) return false;
+    if (p.utime - last_.utime < SecondsToUtime(min_period_s_)) return false;
     if (!Moved(last_, p, min_distance_m_, min_turn_rad_)) return false;
   }
   last_ = p;

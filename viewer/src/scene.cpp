@@ -151,10 +151,9 @@ void Scene::AddKeyframePoints(Utime utime, const float* xyz_camera, size_t n) {
   if (!RobotPose(&robot, &source)) return;  // nowhere to put them yet
   Cloud& c = CloudOf("VO_POINTS");
   if (c.points.size() / 3 >= static_cast<size_t>(options_.max_cloud_points)) return;
-  // VO_POSE is a 3D pose; the others are planar (z and yaw only).
-  Eigen::Isometry3d T_world_base = Eigen::Isometry3d::Identity();
-  T_world_base.translation() = Eigen::Vector3d(robot.x, robot.y, robot.z);
-  T_world_base.linear() = Eigen::AngleAxisd(robot.yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  // Placed in the plane (x, y, yaw) at the pose's height.
+  Eigen::Isometry3d T_world_base = Pose2(robot.x, robot.y, robot.yaw).ToIsometry3();
+  T_world_base.translation().z() = robot.z;
   const Eigen::Isometry3f T = (T_world_base * T_base_camera_).cast<float>();
   std::vector<float> world;
   world.reserve(3 * n);
