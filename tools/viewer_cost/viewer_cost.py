@@ -5,7 +5,7 @@ Chromium showing its page, and prints the CPU time of every process (the sheriff
 the viewer's own, and the estimators' CPU per input message.
 
   tools/viewer_cost/viewer_cost.py [--duration 30] [--bin build/bin]
-Needs UDP multicast, chromium, chromium-driver and python3-selenium. Takes about 2 x (S + 15) s.
+CPU times are the sheriff's (0.1 s resolution). Needs UDP multicast, chromium, chromium-driver and python3-selenium. Takes about 2 x (S + 15) s.
 """
 import argparse
 import os
@@ -101,7 +101,7 @@ def main():
                      ("fusion", "RBPF_POSE")):
         if name in base and n0.get(ch) and n1.get(ch):
             print("%s: %.2f ms CPU per %s message without, %.2f ms with the viewer (%d / %d messages)"
-                  % (name, 1000 * base[name] / n0[ch], 1000 * view[name] / n1[ch], ch, n0[ch], n1[ch]))
+                  % (name, 1000 * base[name] / n0[ch], ch, 1000 * view[name] / n1[ch], n0[ch], n1[ch]))
 
 
 if __name__ == "__main__":
