@@ -8,6 +8,7 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "fusionloc/common/json.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 
 namespace fl::importers {
@@ -17,35 +18,6 @@ std::string Hex(int64_t v) {
   char buf[32];
   std::snprintf(buf, sizeof(buf), "0x%016llx", static_cast<unsigned long long>(v));
   return buf;
-}
-
-std::string JsonString(const std::string& s) {
-  std::string out = "\"";
-  for (const char c : s) {
-    switch (c) {
-      case '"':
-        out += "\\\"";
-        break;
-      case '\\':
-        out += "\\\\";
-        break;
-      case '\n':
-        out += "\\n";
-        break;
-      case '\t':
-        out += "\\t";
-        break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof(buf), "\\u%04x", c);
-          out += buf;
-        } else {
-          out += c;
-        }
-    }
-  }
-  return out + "\"";
 }
 
 std::string Bytes(int64_t b) {
