@@ -173,6 +173,49 @@ TEST(RbpfSlam, SimulatedLoopIsClosed) {
   EXPECT_LT(max_err, 0.25);
 }
 
+// The two-stage AddScan (pose first, keyframe stage after, as the LCM node runs it) leaves
+// the filter exactly where the one-stage call does: the same factors, the same final
+// trajectory; only the pose of a scan whose keyframe stage corrected the filter is the
+// filter's own (the correction shows at the next scan).
+TEST(RbpfSlam, DeferredKeyframeStageGivesTheSameFactorsAndTrajectory) {
+  const test::LoopRun run = RoomLoopRun(1);
+  const RbpfSlamOptions o = TestOptions(10);
+  RbpfSlam once(o), twice(o);
+  int factors = 0, pending = 0, corrected = 0;
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    const LaserScan scan = MakeScan(run.utimes[k], run.ranges[k]);
+    ScanResult a, b;
+    ASSERT_TRUE(once.AddScan(scan, run.odom[k], &a).ok());
+    ASSERT_TRUE(twice.AddScan(scan, run.odom[k], &b, /*defer_keyframe=*/true).ok());
+    EXPECT_TRUE(b.factors.empty());
+    const Pose2 filter_pose = b.T_world_base;
+    if (b.keyframe_pending) ++pending;
+    twice.FinishScan(&b);
+    EXPECT_FALSE(b.keyframe_pending);
+    ASSERT_EQ(a.factors.size(), b.factors.size()) << k;
+    for (size_t f = 0; f < a.factors.size(); ++f) {
+      EXPECT_EQ(a.factors[f].utime_i, b.factors[f].utime_i);
+      EXPECT_EQ(a.factors[f].T_i_j.x, b.factors[f].T_i_j.x);
+      EXPECT_EQ(a.factors[f].T_i_j.theta, b.factors[f].T_i_j.theta);
+    }
+    factors += static_cast<int>(a.factors.size());
+    EXPECT_EQ(a.T_world_base.x, b.T_world_base.x) << k;
+    EXPECT_EQ(a.T_world_base.theta, b.T_world_base.theta) << k;
+    if ((filter_pose.translation() - a.T_world_base.translation()).norm() > 1e-9) ++corrected;
+  }
+  once.Finish();
+  twice.Finish();
+  EXPECT_GT(factors, 20);
+  EXPECT_GT(pending, 20);
+  EXPECT_GE(corrected, 1) << "some keyframe stage should have corrected the filter's pose";
+  const auto ta = once.Trajectory(), tb = twice.Trajectory();
+  ASSERT_EQ(ta.size(), tb.size());
+  for (size_t k = 0; k < ta.size(); ++k) {
+    EXPECT_EQ(ta[k].T_world_base.x, tb[k].T_world_base.x) << k;
+    EXPECT_EQ(ta[k].T_world_base.y, tb[k].T_world_base.y) << k;
+  }
+}
+
 TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {
   // Two laps: on the second, nearly every keyframe could close a loop. With spacing 4 the
   // closures' keyframes are at least 4 apart; with the default (1) some are closer.

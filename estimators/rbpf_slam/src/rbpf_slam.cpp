@@ -131,10 +131,18 @@ void RbpfSlam::ConvertScan(const LaserScan& scan, ScanResult* result) {
 }
 
 fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
-                             ScanResult* result) {
+                             ScanResult* result, bool defer_keyframe) {
   ScanResult local;
   ScanResult* res = result ? result : &local;
   *res = ScanResult();
+  if (keyframe_pending_) {
+    FinishScan(res);
+    const std::vector<KeyframeFactor> factors = std::move(res->factors);
+    const bool graph_changed = res->graph_changed;
+    *res = ScanResult();
+    res->factors = factors;
+    res->graph_changed = graph_changed;
+  }
   // --- Validate the input before touching any state.
   if (initialized_ && scan.utime <= last_utime_) {
     ++stats_.dropped_time_backwards;
@@ -214,12 +222,30 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
     pending_jump_ = false;
     odom_at_processed_ = odom_;
     path_length_ += std::hypot(delta.x, delta.y);
-    MaybeAddKeyframe(scan.utime, res);
+    keyframe_pending_ = true;
+    pending_utime_ = scan.utime;
+    if (defer_keyframe) {
+      res->T_world_base = CurrentPose();
+      res->keyframe_pending = true;
+      return Status::Ok();
+    }
+    FinishScan(res);
+    return Status::Ok();
   }
   res->T_world_base = CurrentPose();
   const int kf = static_cast<int>(keyframes_.size()) - 1;
   path_.push_back({scan.utime, kf, graph_.pose(kf).between(res->T_world_base)});
   return Status::Ok();
+}
+
+void RbpfSlam::FinishScan(ScanResult* res) {
+  if (!keyframe_pending_) return;
+  keyframe_pending_ = false;
+  res->keyframe_pending = false;
+  MaybeAddKeyframe(pending_utime_, res);
+  res->T_world_base = CurrentPose();
+  const int kf = static_cast<int>(keyframes_.size()) - 1;
+  path_.push_back({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base)});
 }
 
 void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res) {
@@ -680,6 +706,8 @@ void RbpfSlam::RebuildMaps() {
 }
 
 void RbpfSlam::Finish() {
+  ScanResult last;
+  FinishScan(&last);
   if (opt_.graph.enabled) OptimizeAndFeedBack(nullptr);
 }
 

@@ -300,9 +300,12 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   }
   const Utime t0 = MonotonicUtime();
   ScanResult r;
-  const Status st = slam_.AddScan(scan, odom, &r);
-  status_.AddItemTime(static_cast<double>(MonotonicUtime() - t0) * 1e-3);
+  // The pose goes out as soon as the filter has it; the keyframe stage (ICP factors, loop
+  // closures, the pose graph) runs after, so that it never delays what the robot steers by. A
+  // correction it makes shows in the next scan's pose.
+  const Status st = slam_.AddScan(scan, odom, &r, /*defer_keyframe=*/true);
   if (!st.ok()) {
+    status_.AddItemTime(static_cast<double>(MonotonicUtime() - t0) * 1e-3);
     status_.CountDropped("LASER: " + st.message());
     warn_.Warn(st.message());
     return;
@@ -317,6 +320,8 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   last_utime_ = scan.utime;
   lcm_->Publish(ch_pose_, PoseToLcm(scan.utime, r.T_world_base), scan.utime);
   status_.CountOut();
+  slam_.FinishScan(&r);
+  status_.AddItemTime(static_cast<double>(MonotonicUtime() - t0) * 1e-3);
   for (const auto& f : r.factors) lcm_->Publish(ch_factors_, FactorToLcm(f), scan.utime);
   if (r.graph_changed) PublishGraph(scan.utime);
   if (r.odometry_jump) {

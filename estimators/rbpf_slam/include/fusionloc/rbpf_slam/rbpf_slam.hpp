@@ -41,6 +41,8 @@ struct ScanResult {
   bool resampled = false;
   bool odometry_jump = false;     // the odometry step was flagged as a jump and not trusted
   bool new_keyframe = false;
+  // AddScan(..., defer_keyframe = true) only: the keyframe stage still has to run (FinishScan).
+  bool keyframe_pending = false;
   std::vector<KeyframeFactor> factors;  // new ICP factors (sequential and loop closures)
   bool graph_changed = false;     // keyframe poses were corrected by the pose graph
   int valid_beams = 0;            // beams used (others were NaN, inf, <= 0 or over range)
@@ -86,7 +88,17 @@ class RbpfSlam {
   // Processes one scan with the odometry pose (T_odom_base) at the scan time. Returns an error
   // (and changes nothing) for a scan whose time does not increase, whose beam count or
   // geometry differs from the first scan, or with a non-finite odometry pose.
-  fl::Status AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, ScanResult* result);
+  //
+  // With defer_keyframe (for a caller that publishes the pose at once, such as the LCM node),
+  // AddScan returns after the filter: result->T_world_base is the filter's pose, and
+  // result->keyframe_pending says that the keyframe stage (keyframe, ICP factors, divergence
+  // check, loop closures, pose graph) is still to run; FinishScan(result) runs it, fills in the
+  // factors and the pose it corrected. The filter's state afterwards is the same as without
+  // deferring. A pending stage left when the next AddScan comes is run by it first, its
+  // factors put in that scan's result.
+  fl::Status AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, ScanResult* result,
+                     bool defer_keyframe = false);
+  void FinishScan(ScanResult* result);
 
   // Final pose-graph optimisation (call at the end of a log before Trajectory()).
   void Finish();
@@ -182,6 +194,8 @@ class RbpfSlam {
   fl::Pose2 odom_;                // odometry with flagged jumps removed
   fl::Pose2 odom_at_processed_;   // `odom_` when the filter last ran
   bool pending_jump_ = false;
+  bool keyframe_pending_ = false;  // AddScan deferred the keyframe stage of ...
+  fl::Utime pending_utime_ = 0;    // ... the scan at this time
   double path_length_ = 0.0;
 
   // Per-scan buffers (reused).
