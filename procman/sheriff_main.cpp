@@ -84,7 +84,10 @@ int main(int argc, char** argv) {
   std::vector<fl::ChannelSpec> inputs = {
       {fl::channels::kPmdInfo, "bot_procman.info2_t", "the deputies' status"},
       {fl::channels::kPmdPrintf, "bot_procman.printf_t", "the commands' output (--show-output)"},
-      {fl::channels::kPmdSheriffCtl, "bot_procman.printf_t", "orders from fl-procman-ctl"}};
+      {fl::channels::kPmdSheriffCtl, "bot_procman.printf_t",
+       "orders from fl-procman-ctl (refused when this sheriff signs its orders)"},
+      {fl::channels::kPmdSheriffCtlSigned, "fusionloc.procman_signed_orders_t",
+       "orders from fl-procman-ctl signed with the key"}};
   std::vector<fl::ChannelSpec> outputs = {
       {fl::channels::kPmdOrders, "bot_procman.orders2_t", "orders to the deputies"},
       {fl::procman::kCtlReplyChannel, "bot_procman.printf_t", "answers to fl-procman-ctl"}};
@@ -154,7 +157,9 @@ int main(int argc, char** argv) {
           throw fl::UsageError(e.what());
         }
         std::cout << "orders signed with key " << signer->key_id() << " (" << path << ") on "
-                  << process.channels()(fl::channels::kPmdOrdersSigned) << "\n";
+                  << process.channels()(fl::channels::kPmdOrdersSigned)
+                  << "; fl-procman-ctl orders only when signed with it (--key)\n";
+        node.RequireSignedCtl({fl::procman::LoadKey(path)});
         const std::string signed_channel = process.channels()(fl::channels::kPmdOrdersSigned);
         node.set_orders_sink([&, signed_channel](const bot_procman::orders2_t& o) {
           std::vector<uint8_t> bytes(static_cast<size_t>(o.getEncodedSize()));

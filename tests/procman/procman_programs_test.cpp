@@ -264,8 +264,27 @@ TEST(ProcmanPrograms, KeysSignedOrdersAndTheNoKeyError) {
                               "/fl-procman-sheriff t.cfg --key keys/k --status-period 0 "
                               "--lcm-url '" +
                               url + "' < /dev/null > sheriff.out 2>&1");
-  const std::string ctl = bin + "/fl-procman-ctl --lcm-url '" + url + "' ";
-  ASSERT_TRUE(WaitFor([&] { return RunCommand(ctl + "start g/sleeper", dir).status == 0; }));
+  // A sheriff that signs takes fl-procman-ctl's orders only signed with its key: otherwise
+  // anyone on the network could have it sign their orders.
+  const std::string ctl = bin + "/fl-procman-ctl --key keys/k --lcm-url '" + url + "' ";
+  ASSERT_TRUE(WaitFor([&] { return RunCommand(ctl + "start g/sleeper", dir).status == 0; }))
+      << Read(dir.file("sheriff.out"));
+  const auto plain =
+      RunCommand(bin + "/fl-procman-ctl --insecure --lcm-url '" + url + "' stop g/sleeper", dir);
+  EXPECT_EQ(plain.status, 1) << plain.out << plain.err;
+  EXPECT_NE(plain.out.find("refused: this sheriff signs its orders"), std::string::npos)
+      << plain.out;
+  ASSERT_EQ(RunCommand(bin + "/fl-procman-sheriff --new-key keys/other", dir).status, 0);
+  const auto other = RunCommand(
+      bin + "/fl-procman-ctl --key keys/other --lcm-url '" + url + "' stop g/sleeper", dir);
+  EXPECT_EQ(other.status, 1) << other.out << other.err;
+  EXPECT_NE(other.out.find("refused: unknown key id"), std::string::npos) << other.out;
+  EXPECT_NE(Read(dir.file("sheriff.out")).find("refused an unsigned order from ctl-"),
+            std::string::npos)
+      << Read(dir.file("sheriff.out"));
+  EXPECT_NE(Read(dir.file("sheriff.out")).find("refused a signed order from ctl-"),
+            std::string::npos)
+      << Read(dir.file("sheriff.out"));
   std::string status;
   EXPECT_TRUE(WaitFor([&] {
     status = RunCommand(ctl + "status", dir).out;

@@ -43,17 +43,48 @@ SheriffNode::SheriffNode(Sheriff* sheriff, LcmInterface* lcm, const ChannelMap& 
           out_->flush();
         });
   }
-  const std::string reply_channel = channels(kCtlReplyChannel);
+  reply_channel_ = channels(kCtlReplyChannel);
   lcm_->Subscribe<bot_procman::printf_t>(
       channels(channels::kPmdSheriffCtl),
-      [this, reply_channel](const bot_procman::printf_t& msg, const std::string&) {
+      [this](const bot_procman::printf_t& msg, const std::string&) {
+        if (ctl_verifier_) {
+          ++plain_ctl_refused_;
+          *out_ << "refused an unsigned order from " << msg.deputy_name << ": " << msg.text
+                << " (this sheriff takes only signed ones)\n";
+          Reply(msg.deputy_name,
+                "refused: this sheriff signs its orders and takes only signed ones; run "
+                "fl-procman-ctl with --key FILE (the sheriff's key)");
+          return;
+        }
         *out_ << "order from " << msg.deputy_name << ": " << msg.text << "\n";
-        bot_procman::printf_t reply;
-        reply.utime = WallClockUs();
-        reply.deputy_name = msg.deputy_name;
-        reply.sheriff_id = 0;
-        reply.text = Execute(msg.text);
-        lcm_->Publish(reply_channel, reply);
+        Reply(msg.deputy_name, Execute(msg.text));
+      });
+  lcm_->Subscribe<fusionloc::procman_signed_orders_t>(
+      channels(channels::kPmdSheriffCtlSigned),
+      [this](const fusionloc::procman_signed_orders_t& env, const std::string&) {
+        if (!ctl_verifier_) {
+          Reply(env.sheriff_id,
+                "refused: this sheriff has no key (started without --key or with --insecure); "
+                "send the order unsigned (fl-procman-ctl --insecure)");
+          return;
+        }
+        std::vector<uint8_t> payload;
+        const OrderVerifier::Verdict v = ctl_verifier_->Verify(env, WallClockUs(), &payload);
+        bot_procman::printf_t msg;
+        if (v != OrderVerifier::Verdict::kOk ||
+            msg.decode(payload.data(), 0, static_cast<int>(payload.size())) !=
+                static_cast<int>(payload.size())) {
+          const std::string why = v != OrderVerifier::Verdict::kOk
+                                      ? std::string(OrderVerifier::Name(v)) + " (" +
+                                            ctl_verifier_->last_detail() + ")"
+                                      : "the signed payload is not a bot_procman.printf_t";
+          *out_ << "refused a signed order from " << env.sheriff_id << ": " << why << "\n";
+          Reply(env.sheriff_id, "refused: " + why);
+          return;
+        }
+        *out_ << "order from " << msg.deputy_name << " (signed, key " << env.key_id
+              << "): " << msg.text << "\n";
+        Reply(msg.deputy_name, Execute(msg.text));
       });
   bot_procman::discovery_t d;
   d.utime = WallClockUs();
@@ -69,6 +100,19 @@ double SheriffNode::Now() const {
 
 void SheriffNode::PublishPlain(const bot_procman::orders2_t& orders) {
   lcm_->Publish(orders_channel_, orders);
+}
+
+void SheriffNode::RequireSignedCtl(std::vector<Key> keys) {
+  ctl_verifier_ = std::make_unique<OrderVerifier>(std::move(keys), OrderVerifier::Options());
+}
+
+void SheriffNode::Reply(const std::string& client, const std::string& text) {
+  bot_procman::printf_t reply;
+  reply.utime = WallClockUs();
+  reply.deputy_name = client;
+  reply.sheriff_id = 0;
+  reply.text = text;
+  lcm_->Publish(reply_channel_, reply);
 }
 
 std::string SheriffNode::Execute(const std::string& line) {

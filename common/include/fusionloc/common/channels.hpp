@@ -52,5 +52,9 @@ constexpr const char* kStatusPrefix = "STATUS_";
 // fusionloc.procman_signed_orders_t: a bot_procman.orders2_t with a MAC, sheriff -> deputy
 // (procman/include/fusionloc/procman/order_auth.hpp).
 constexpr const char* kPmdOrdersSigned = "PMD_ORDERS2_SIGNED";
+// fl-procman-ctl's text orders signed with the procman key (fusionloc.procman_signed_orders_t
+// whose payload is the LCM-encoded bot_procman.printf_t order); a sheriff that signs its orders
+// takes ctl orders only this way.
+constexpr const char* kPmdSheriffCtlSigned = "PMD_SHERIFF_CTL_SIGNED";
 
 }  // namespace fl::channels
