@@ -49,6 +49,7 @@ struct Input {
   std::string log;         // CARMEN log to run
   std::string reference;   // CARMEN log whose GROUND_TRUTH is the reference ("" = log itself)
   std::string sim_config;  // a simulated world's options (config/sim_<world>.yaml) instead of a log
+  std::string relations;   // Kuemmerle et al. relations for the log (NAME.relations), "" = none
 };
 
 struct LogData {
@@ -348,6 +349,8 @@ int main(int argc, char** argv) {
     Input in;
     in.log = f.string();
     in.name = n.substr(0, n.find('.'));
+    const fs::path relations = f.parent_path() / (in.name + ".relations");
+    if (fs::exists(relations)) in.relations = relations.string();
     if (n == "mit-csail.clf") {
       const fs::path ref = f.parent_path() / "csail-corrected.log.gz";
       if (!fs::exists(ref)) {
@@ -427,6 +430,7 @@ int main(int argc, char** argv) {
         std::vector<double> ms_processed, ms_all, chi2_seq, chi2_loop;
         double along_factor_m = 0.0, along_reference_m = 0.0;  // sequential factors
         int64_t skipped = 0;
+        fl::eval::Trajectory online;  // the pose of each scan as AddScan gave it (RBPF_POSE)
         fl::bench::Progress progress("[bench laser] " + run_name,
                                      static_cast<int64_t>(data.scans.size()));
         for (size_t i = 0; i < data.scans.size(); ++i) {
@@ -446,6 +450,7 @@ int main(int argc, char** argv) {
             continue;
           }
           ms_all.push_back(ms);
+          online.push_back({data.scans[i].utime, r.T_world_base.ToIsometry3()});
           for (const fl::rbpf::KeyframeFactor& f : r.factors) {
             fl::Pose2 a, b;
             if (!ReferenceAt(data.ground_truth, f.utime_i, max_dt, &a) ||
@@ -524,6 +529,23 @@ int main(int argc, char** argv) {
             .Add("loop_chi2_median",
                  chi2_loop.empty() ? -1.0 : fl::bench::ComputeStats(chi2_loop).median)
             .Add("peak_rss_mb", fl::bench::PeakRssMb());
+        if (!in.relations.empty()) {
+          // Kuemmerle et al. 2009: the final trajectory (a pose for every scan) and the online
+          // pose against the log's hand-checked relations.
+          const std::vector<fl::eval::Relation> relations = fl::eval::ReadRelations(in.relations);
+          const fl::eval::RelationResult fr =
+              fl::eval::ComputeRelationError(est, relations, max_dt);
+          const fl::eval::RelationResult onr =
+              fl::eval::ComputeRelationError(online, relations, max_dt);
+          run.Add("relation_trans_mean_m", fr.trans_m.mean)
+              .Add("relation_trans_std_m", fr.trans_m.std)
+              .Add("relation_rot_mean_deg", fr.rot_deg.mean)
+              .Add("relation_rot_std_deg", fr.rot_deg.std)
+              .Add("relations_used", static_cast<double>(fr.used))
+              .Add("relations_total", static_cast<double>(relations.size()))
+              .Add("online_relation_trans_mean_m", onr.trans_m.mean)
+              .Add("online_relation_rot_mean_deg", onr.rot_deg.mean);
+        }
         if (refit && in.sim_config.empty()) {
           int refit_edges = 0;
           const fl::eval::Trajectory fitted =
