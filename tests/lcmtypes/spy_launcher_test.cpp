@@ -21,12 +21,17 @@
 
 namespace {
 
-using fl::test::BinDir;
-using fl::test::ReadFile;
-using fl::test::RunCommand;
-using fl::test::Spawn;
-using fl::test::TempDir;
-using fl::test::WaitFor;
+namespace t = fl::test;
+
+// Stops a spawned process group when the test ends early (an assertion failed).
+struct StopOnExit {
+  pid_t pid = 0;
+  ~StopOnExit() {
+    if (pid <= 0) return;
+    kill(-pid, SIGKILL);
+    waitpid(pid, nullptr, 0);
+  }
+};
 
 bool OnPath(const std::string& program) {
   return std::system(("command -v " + program + " > /dev/null 2>&1").c_str()) == 0;
@@ -45,11 +50,12 @@ TEST(SpyLauncher, LcmSpyReceivesEveryStereoPairOfALog) {
     GTEST_SKIP() << "no UDP multicast on this machine (" << e.what()
                  << "); ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo";
   }
-  TempDir dir;
+  t::TempDir dir;
   // 10 s of the simulated robot: STEREO (bot_core.images_t, two 640x480 gray images, ~600 KB)
   // at 2 Hz besides laser, odometry, ground truth and calibration.
   const std::string log = dir.file("sim.lcmlog");
-  ASSERT_EQ(RunCommand(BinDir() + "/fl-sim --log-level warn --duration 10 --log " + log, dir).status,
+  ASSERT_EQ(t::RunCommand(t::BinDir() + "/fl-sim --log-level warn --duration 10 --log " + log, dir)
+                .status,
             0);
   std::map<std::string, int64_t> in_log;
   {
@@ -61,30 +67,30 @@ TEST(SpyLauncher, LcmSpyReceivesEveryStereoPairOfALog) {
 
   // lcm-spy counts for a fixed window; the log plays well inside it.
   const std::string out = dir.file("spy.out");
-  const pid_t spy = Spawn("FL_BUILD_DIR='" + fl::test::BinaryDir() + "' exec xvfb-run -a '" +
-                          fl::test::SourceDir() + "/fusionloc' spy '" + url +
-                          "' --count-seconds 20 > '" + out + "' 2>&1");
-  ASSERT_TRUE(WaitFor([&] { return ReadFile(out).find("fl-spy: counting") != std::string::npos; },
-                      60.0))
-      << ReadFile(out);
+  const pid_t spy =
+      t::Spawn("FL_BUILD_DIR='" + t::BinaryDir() + "' exec xvfb-run -a '" + t::SourceDir() +
+               "/fusionloc' spy '" + url + "' --count-seconds 20 > '" + out + "' 2>&1");
+  StopOnExit stop{spy};
+  ASSERT_TRUE(t::WaitFor(
+      [&] { return t::ReadFile(out).find("fl-spy: counting") != std::string::npos; }, 60.0))
+      << t::ReadFile(out);
   // The launcher says what receive buffer the kernel gave (rmem_max caps it).
-  EXPECT_NE(ReadFile(out).find("fl-spy: UDP receive buffer"), std::string::npos) << ReadFile(out);
+  EXPECT_NE(t::ReadFile(out).find("fl-spy: UDP receive buffer"), std::string::npos)
+      << t::ReadFile(out);
 
   // Five times real time: STEREO at 10 Hz, about 6 MB/s.
   const auto played =
-      RunCommand("lcm-logplayer --speed=5 --lcm-url='" + url + "' '" + log + "'", dir);
+      t::RunCommand("lcm-logplayer --speed=5 --lcm-url='" + url + "' '" + log + "'", dir);
   EXPECT_EQ(played.status, 0) << played.err;
   int status = 0;
-  const bool still_counting = waitpid(spy, &status, WNOHANG) == 0;
-  if (!still_counting) {
-    ADD_FAILURE() << "lcm-spy stopped counting before the log was played:\n" << ReadFile(out);
-  }
-  if (still_counting && !WaitFor([&] { return waitpid(spy, &status, WNOHANG) == spy; }, 60.0)) {
-    kill(-spy, SIGKILL);
-    waitpid(spy, &status, 0);
-    FAIL() << "lcm-spy did not print its counts:\n" << ReadFile(out);
-  }
-  const std::string text = ReadFile(out);
+  ASSERT_EQ(waitpid(spy, &status, WNOHANG), 0)
+      << "lcm-spy stopped counting before the log was played:\n"
+      << t::ReadFile(out);
+  ASSERT_TRUE(t::WaitFor([&] { return waitpid(spy, &status, WNOHANG) == spy; }, 60.0))
+      << "lcm-spy did not print its counts:\n"
+      << t::ReadFile(out);
+  stop.pid = 0;  // reaped
+  const std::string text = t::ReadFile(out);
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << text;
 
   std::map<std::string, int64_t> received, undecodable;

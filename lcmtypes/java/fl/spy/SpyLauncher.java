@@ -83,7 +83,9 @@ public final class SpyLauncher {
           if (recvBuf < 0) throw new IllegalArgumentException("--recv-buf-size must be >= 0");
         } else if (a.equals("--count-seconds")) {
           countSeconds = Double.parseDouble(value(args, ++i, a));
-          if (!(countSeconds > 0)) throw new IllegalArgumentException("--count-seconds must be > 0");
+          if (!(countSeconds > 0)) {
+            throw new IllegalArgumentException("--count-seconds must be > 0");
+          }
         } else {
           throw new IllegalArgumentException("unknown option '" + a + "' (see --help)");
         }
