@@ -15,13 +15,16 @@
 
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/procman/process.hpp"
+#include "process_fixtures.hpp"
 #include "test_paths.hpp"
 
 namespace {
 
 using fl::test::BinDir;
 using fl::test::RunCommand;
+using fl::test::Spawn;
 using fl::test::TempDir;
+using fl::test::WaitFor;
 
 std::string Url(int offset) {
   return "udpm://239.255.76.67:" + std::to_string(7300 + (getpid() * 7 + offset) % 400) + "?ttl=0";
@@ -44,26 +47,6 @@ std::string Read(const std::string& path) {
 }
 
 void WriteFile(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
-
-// Starts a shell command in the background; returns its pid.
-pid_t Spawn(const std::string& command) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    setpgid(0, 0);
-    execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  return pid;
-}
-
-bool WaitFor(const std::function<bool()>& done, double timeout_s = 10.0) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (std::chrono::steady_clock::now() < end) {
-    if (done()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  return false;
-}
 
 const char* kCfg =
     // ${WHO} inside double quotes is the deputy's (--var); inside single quotes it would be sh's.
