@@ -18,28 +18,6 @@ double MsSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-// SE(2) exponential / logarithm of a twist (vx, vy, omega) over unit time.
-Pose2 ExpSe2(double vx, double vy, double w) {
-  if (std::fabs(w) < 1e-9) return Pose2(vx, vy, w);
-  const double a = std::sin(w) / w, b = (1.0 - std::cos(w)) / w;
-  return Pose2(a * vx - b * vy, b * vx + a * vy, w);
-}
-
-Eigen::Vector3d LogSe2(const Pose2& p) {
-  const double w = p.theta;
-  if (std::fabs(w) < 1e-9) return Eigen::Vector3d(p.x, p.y, w);
-  const double a = std::sin(w) / w, b = (1.0 - std::cos(w)) / w;
-  const double det = a * a + b * b;
-  return Eigen::Vector3d((a * p.x + b * p.y) / det, (-b * p.x + a * p.y) / det, w);
-}
-
-// Pose at fraction alpha of the way from a to b along the constant-velocity (constant
-// curvature) path: a * Exp(alpha * Log(a^-1 b)). Exact for arcs, unlike interpolating x, y.
-Pose2 Interpolate(const Pose2& a, const Pose2& b, double alpha) {
-  const Eigen::Vector3d twist = LogSe2(a.between(b));
-  return a * ExpSe2(alpha * twist[0], alpha * twist[1], alpha * twist[2]);
-}
-
 Pose2 ToPose2(const Eigen::Vector3d& v) { return Pose2(v[0], v[1], v[2]); }
 Eigen::Vector3d ToVector(const Pose2& p) { return Eigen::Vector3d(p.x, p.y, p.theta); }
 

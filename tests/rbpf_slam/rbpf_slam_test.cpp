@@ -216,6 +216,44 @@ TEST(RbpfSlam, DeferredKeyframeStageGivesTheSameFactorsAndTrajectory) {
   }
 }
 
+// The final trajectory gives every scan a pose; a scan the filter did not run on (here three
+// scans in four: the filter runs every metre) is blended between the filtered scans around it,
+// so the odometry's drift between two filter runs is corrected on it too. (Without the blend
+// the final steps' heading error is the online one's, 0.0169 vs 0.0171 rad; with it 0.0063.)
+TEST(RbpfSlam, ScansBetweenFilterRunsAreBlendedIntoTheFinalTrajectory) {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  lo.odom_rot_bias = 0.05;  // [rad/m] strong heading drift
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  RbpfSlamOptions o = TestOptions(10);
+  o.linear_update = 0.9;
+  o.angular_update = 1.0;
+  o.max_turn_rate = 0.0;
+  RbpfSlam slam(o);
+  std::vector<Pose2> online;
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    ASSERT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    online.push_back(r.T_world_base);
+  }
+  slam.Finish();
+  const auto traj = slam.Trajectory();
+  ASSERT_EQ(traj.size(), run.utimes.size());
+  // Error of each scan's motion from the previous scan, against the truth's.
+  auto step_error = [&](const std::vector<Pose2>& poses) {
+    double sum = 0.0;
+    for (size_t k = 1; k < poses.size(); ++k) {
+      const Pose2 e = run.truth[k - 1].between(run.truth[k]).between(poses[k - 1].between(poses[k]));
+      sum += std::abs(e.theta);
+    }
+    return sum / static_cast<double>(poses.size() - 1);
+  };
+  std::vector<Pose2> final_poses;
+  for (const auto& p : traj) final_poses.push_back(p.T_world_base);
+  const double online_err = step_error(online), final_err = step_error(final_poses);
+  EXPECT_LT(final_err, 0.5 * online_err) << "online " << online_err << " final " << final_err;
+}
+
 TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {
   // Two laps: on the second, nearly every keyframe could close a loop. With spacing 4 the
   // closures' keyframes are at least 4 apart; with the default (1) some are closer.

@@ -192,7 +192,7 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
     res->T_world_base = odom_pose;
     res->neff = static_cast<double>(particles_.size());
     MaybeAddKeyframe(scan.utime, res);
-    path_.push_back({scan.utime, 0, fl::Pose2()});
+    path_.push_back({scan.utime, 0, fl::Pose2(), odom_, true});
     return Status::Ok();
   }
 
@@ -234,7 +234,7 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
   }
   res->T_world_base = CurrentPose();
   const int kf = static_cast<int>(keyframes_.size()) - 1;
-  path_.push_back({scan.utime, kf, graph_.pose(kf).between(res->T_world_base)});
+  path_.push_back({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), odom_, false});
   return Status::Ok();
 }
 
@@ -245,7 +245,7 @@ void RbpfSlam::FinishScan(ScanResult* res) {
   MaybeAddKeyframe(pending_utime_, res);
   res->T_world_base = CurrentPose();
   const int kf = static_cast<int>(keyframes_.size()) - 1;
-  path_.push_back({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base)});
+  path_.push_back({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base), odom_, true});
 }
 
 void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res) {
@@ -715,6 +715,23 @@ std::vector<StampedPose2> RbpfSlam::Trajectory() const {
   std::vector<StampedPose2> out;
   out.reserve(path_.size());
   for (const PathRecord& r : path_) out.push_back({r.utime, graph_.pose(r.keyframe) * r.T_kf_base});
+  // A scan the filter did not run on (too little motion, a fast turn) was placed by the
+  // odometry from the filtered scan before it; the next filtered scan's correction of that
+  // odometry is spread over the scans between them: each is blended, by time, from the pose
+  // carried forward from the filtered scan before and back from the one after.
+  size_t a = 0;
+  while (a < path_.size()) {
+    size_t b = a + 1;
+    while (b < path_.size() && !path_[b].filtered) ++b;
+    if (b >= path_.size()) break;  // scans after the last filtered one keep the forward pose
+    const double span = static_cast<double>(path_[b].utime - path_[a].utime);
+    for (size_t s = a + 1; s < b; ++s) {
+      const fl::Pose2 back = out[b].T_world_base * path_[s].odom.between(path_[b].odom).inverse();
+      const double alpha = static_cast<double>(path_[s].utime - path_[a].utime) / span;
+      out[s].T_world_base = fl::Interpolate(out[s].T_world_base, back, alpha);
+    }
+    a = b;
+  }
   return out;
 }
 

@@ -77,6 +77,26 @@ struct Pose2 {
   }
 };
 
+// SE(2) exponential of a twist (vx, vy, omega) over unit time, and its logarithm.
+inline Pose2 ExpSe2(double vx, double vy, double w) {
+  if (std::fabs(w) < 1e-9) return Pose2(vx, vy, w);
+  const double a = std::sin(w) / w, b = (1.0 - std::cos(w)) / w;
+  return Pose2(a * vx - b * vy, b * vx + a * vy, w);
+}
+inline Eigen::Vector3d LogSe2(const Pose2& p) {
+  const double w = p.theta;
+  if (std::fabs(w) < 1e-9) return Eigen::Vector3d(p.x, p.y, w);
+  const double a = std::sin(w) / w, b = (1.0 - std::cos(w)) / w;
+  const double det = a * a + b * b;
+  return Eigen::Vector3d((a * p.x + b * p.y) / det, (-b * p.x + a * p.y) / det, w);
+}
+// Pose at fraction alpha of the way from a to b along the constant-velocity (constant
+// curvature) path: a * Exp(alpha * Log(a^-1 b)). Exact for arcs, unlike interpolating x, y.
+inline Pose2 Interpolate(const Pose2& a, const Pose2& b, double alpha) {
+  const Eigen::Vector3d twist = LogSe2(a.between(b));
+  return a * ExpSe2(alpha * twist[0], alpha * twist[1], alpha * twist[2]);
+}
+
 // Builds an SE(3) transform from a translation and a (w, x, y, z) quaternion array.
 inline Eigen::Isometry3d IsometryFromArrays(const double trans[3], const double quat_wxyz[4]) {
   Eigen::Quaterniond q(quat_wxyz[0], quat_wxyz[1], quat_wxyz[2], quat_wxyz[3]);

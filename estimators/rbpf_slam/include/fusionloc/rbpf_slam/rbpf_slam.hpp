@@ -104,8 +104,10 @@ class RbpfSlam {
   void Finish();
 
   fl::Pose2 CurrentPose() const;
-  // Pose of every accepted scan: keyframe poses from the graph composed with the best
-  // particle's motion since that keyframe.
+  // Pose of every accepted scan (the final, smoothed trajectory at the sensor rate): keyframe
+  // poses from the graph composed with the best particle's motion since that keyframe; a scan
+  // the filter did not run on is blended between the filtered scans around it (the next
+  // one's correction of the odometry spread over the scans before it).
   std::vector<StampedPose2> Trajectory() const;
   std::vector<StampedPose2> KeyframePoses() const;
   // The keyframe pose graph (nodes = keyframes; ICP, filter, weak and loop-closure edges).
@@ -131,6 +133,8 @@ class RbpfSlam {
     fl::Utime utime;
     int keyframe;          // latest keyframe when the scan arrived
     fl::Pose2 T_kf_base;   // pose relative to that keyframe
+    fl::Pose2 odom;        // odometry pose (flagged jumps removed) at the scan
+    bool filtered;         // the filter ran on this scan (its pose is scan-matched)
   };
   struct Keyframe {
     fl::Utime utime;
