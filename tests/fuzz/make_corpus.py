@@ -218,8 +218,10 @@ def main():
             return m
 
         def image(w, h, shift, seed):
+            # Blocks of 4x4 random gray (corners for FAST), the right image shifted by `shift`.
             r = random.Random(seed)
-            base = [[r.randrange(256) for _ in range(w + 8)] for _ in range(h)]
+            blocks = [[r.randrange(256) for _ in range((w + 8) // 4 + 1)] for _ in range(h // 4 + 1)]
+            base = [[blocks[y // 4][x // 4] for x in range(w + 8)] for y in range(h)]
             m = T["bot_core.image_t"]()
             m.width, m.height, m.row_stride = w, h, w
             m.pixelformat = 1497715271  # GRAY
@@ -229,7 +231,7 @@ def main():
             m.nmetadata = 0
             return m
 
-        def stereo(k, w=64, h=48):
+        def stereo(k, w=64, h=64):
             m = T["bot_core.images_t"]()
             m.utime = 1000000 + 100000 * k
             m.n_images = 2
@@ -239,7 +241,7 @@ def main():
                 im.utime = m.utime
             return m
 
-        def calib(w=64, h=48):
+        def calib(w=64, h=64):
             m = T["fusionloc.stereo_calibration_t"]()
             m.width, m.height = w, h
             m.fx = m.fy = 50.0

@@ -17,6 +17,7 @@
 #include "bot_core/pose_t.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/log.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
 namespace fl::importers {
@@ -40,12 +41,14 @@ std::vector<std::string> Tokenize(const std::string& line) {
 }
 
 // Parses a finite number that is the whole token; else a FILE:LINE error naming the field.
+// Numbers too small for a normal double (CARMEN loggers print values such as 9.53173e-312:
+// strtod gives the subnormal or 0 with ERANGE) are accepted; only inf, nan and overflow are
+// refused.
 double ParseNumber(const std::string& token, const char* field, const std::string& type,
                    const std::string& path, int64_t line) {
-  errno = 0;
   char* end = nullptr;
   const double v = std::strtod(token.c_str(), &end);
-  if (end == token.c_str() || *end != '\0' || errno == ERANGE || !std::isfinite(v)) {
+  if (end == token.c_str() || *end != '\0' || !std::isfinite(v)) {
     LineError(path, line,
               type + " field '" + field + "' is '" + token +
                   "', not a finite number (corrupt line; repair or delete it)");
@@ -214,10 +217,10 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
   LineReader reader(path);
   std::string text;
   int64_t flaser_lines = 0, robotlaser_lines = 0;
-  while (reader.Next(&text)) {
-    const int64_t line = reader.line_number();
+  // One line; throws std::runtime_error "FILE:LINE: ..." if it is malformed.
+  const auto parse_line = [&](const std::string& text, int64_t line) {
     const std::vector<std::string> t = Tokenize(text);
-    if (t.empty() || t[0][0] == '#') continue;
+    if (t.empty() || t[0][0] == '#') return;
     const std::string& type = t[0];
     if (type == "FLASER") {
       if (t.size() < 2) LineError(path, line, "truncated FLASER line: no beam count");
@@ -348,6 +351,23 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
       log.odom.push_back(o);
     } else {
       ++log.skipped_types[type];
+    }
+  };
+  // A log cut short while it was written ends in a partial line: the last line, if it does
+  // not parse, is dropped with a warning naming it (everything before it is kept). A bad
+  // line anywhere else is an error.
+  bool have = reader.Next(&text);
+  while (have) {
+    const int64_t line = reader.line_number();
+    const std::string current = std::move(text);
+    have = reader.Next(&text);
+    try {
+      parse_line(current, line);
+    } catch (const std::runtime_error& e) {
+      if (have) throw;
+      FL_LOG(WARN) << "dropped the last line (" << e.what()
+                   << "): the log ends in an incomplete line, probably cut short while written";
+      log.dropped_last_line = line;
     }
   }
   log.lines = reader.line_number();
@@ -507,6 +527,10 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
   ConvertSummary summary;
   summary.input = in;
   summary.output = out_log;
+  if (log.dropped_last_line > 0) {
+    summary.warnings.push_back("dropped the incomplete last line " + in + ":" +
+                            std::to_string(log.dropped_last_line));
+  }
   if (!options.timestamps_from.empty()) {
     const CarmenLog raw =
         ReadCarmenLog(options.timestamps_from, options.timestamp, options.fov_deg);

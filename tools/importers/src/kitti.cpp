@@ -516,8 +516,10 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
            std::to_string(frames) + " images in " + left_dir + " (one line per image needed)");
     }
     if (all.size() > frames) {
-      FL_LOG(WARN) << path << ": " << all.size() << " time stamps for " << frames
-                   << " images in " << left_dir << "; using the first " << frames;
+      seq.warnings.push_back(path + ": " + std::to_string(all.size()) + " time stamps for " +
+                             std::to_string(frames) + " images in " + left_dir +
+                             "; using the first " + std::to_string(frames));
+      FL_LOG(WARN) << seq.warnings.back();
       all.resize(frames);
     }
     return all;
@@ -555,8 +557,10 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     if (!IsFile(ppath)) Fail(ppath + ": pose file missing (check --poses)");
     seq.T_cam0start_cam0 = ParseKittiPoses(ReadText(ppath), ppath);
     if (seq.T_cam0start_cam0.size() > frames) {
-      FL_LOG(WARN) << ppath << ": " << seq.T_cam0start_cam0.size() << " poses for " << frames
-                   << " frames in " << folder << "; using the first " << frames;
+      seq.warnings.push_back(ppath + ": " + std::to_string(seq.T_cam0start_cam0.size()) +
+                             " poses for " + std::to_string(frames) + " frames in " + folder +
+                             "; using the first " + std::to_string(frames));
+      FL_LOG(WARN) << seq.warnings.back();
       seq.T_cam0start_cam0.resize(frames);
     }
     if (seq.T_cam0start_cam0.size() != frames) {
@@ -596,6 +600,7 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
   ConvertSummary summary;
   summary.input = folder;
   summary.output = out_log;
+  summary.warnings = seq.warnings;
   const KittiCalibration& c = seq.calibration;
   const Eigen::Matrix3d R_bc = RotationBaseCamera();
 

@@ -86,6 +86,7 @@ struct KittiSequence {
   KittiCalibration calibration;
   std::string poses_path;                           // pose file or oxts folder used; "" if none
   std::vector<Eigen::Isometry3d> T_cam0start_cam0;  // per frame, empty if no poses
+  std::vector<std::string> warnings;  // e.g. a times.txt longer than the images (first N used)
 };
 
 // Scans and validates a folder (layout, image lists, time stamps, calibration, poses).
