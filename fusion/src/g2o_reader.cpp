@@ -1,6 +1,7 @@
 #include "fusionloc/fusion/g2o_reader.hpp"
 
 #include <cmath>
+#include <cstdlib>
 #include <deque>
 #include <fstream>
 #include <set>
@@ -86,8 +87,8 @@ Eigen::Matrix<double, N, N> UpperToSymmetric(const double* upper) {
 // (|i - j| = 1) first: a 0-1 breadth-first search where chain edges cost 0 and the others 1.
 // Returns the number of connected parts.
 template <class Pose, class Edges, class Poses, class Compose, class Invert>
-int InitialiseFromEdges(const Edges& edges, Poses* poses, const Compose& compose,
-                        const Invert& invert) {
+int InitialiseFromEdges(const Edges& edges, const Pose& origin, Poses* poses,
+                        const Compose& compose, const Invert& invert) {
   struct Link {
     int to;
     size_t edge;
@@ -100,14 +101,15 @@ int InitialiseFromEdges(const Edges& edges, Poses* poses, const Compose& compose
   }
   std::set<int> done;
   int parts = 0;
-  for (const auto& [root, unused] : links) {
+  for (const auto& entry : links) {
+    const int root = entry.first;
     if (done.count(root)) continue;
     ++parts;
-    (*poses)[root] = Pose();
-    std::deque<std::pair<int, int>> queue{{root, root}};  // (vertex, its parent)
-    std::map<int, std::pair<int, size_t>> parent;        // vertex -> (parent, edge) when queued
+    (*poses)[root] = origin;
+    std::deque<int> queue{root};
+    std::map<int, std::pair<int, size_t>> parent;  // vertex -> (parent, edge) when queued
     while (!queue.empty()) {
-      const int v = queue.front().first;
+      const int v = queue.front();
       queue.pop_front();
       if (done.count(v)) continue;
       done.insert(v);
@@ -118,15 +120,15 @@ int InitialiseFromEdges(const Edges& edges, Poses* poses, const Compose& compose
       }
       for (const Link& l : links[v]) {
         if (done.count(l.to)) continue;
-        const bool chain = std::abs(static_cast<long>(l.to) - v) == 1;
+        const bool chain = std::abs(static_cast<int64_t>(l.to) - v) == 1;
         // A chain edge may replace a loop-closure parent found earlier.
         auto it = parent.find(l.to);
         if (it == parent.end() || chain) {
           parent[l.to] = {v, l.edge};
           if (chain) {
-            queue.push_front({l.to, v});
+            queue.push_front(l.to);
           } else {
-            queue.push_back({l.to, v});
+            queue.push_back(l.to);
           }
         }
       }
@@ -218,8 +220,8 @@ Status ReadG2o(std::istream& in, const std::string& name, G2oGraph* graph) {
     // Edges only (several public benchmark collections ship graphs so).
     int parts = 0;
     if (!graph->edges2.empty()) {
-      parts = InitialiseFromEdges<Eigen::Vector3d>(
-          graph->edges2, &graph->poses2,
+      parts = InitialiseFromEdges(
+          graph->edges2, Eigen::Vector3d::Zero().eval(), &graph->poses2,
           [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
             const Pose2 c = Pose2(a.x(), a.y(), a.z()) * Pose2(b.x(), b.y(), b.z());
             return Eigen::Vector3d(c.x, c.y, c.theta);
@@ -229,8 +231,8 @@ Status ReadG2o(std::istream& in, const std::string& name, G2oGraph* graph) {
             return Eigen::Vector3d(c.x, c.y, c.theta);
           });
     } else {
-      parts = InitialiseFromEdges<G2oPose3>(
-          graph->edges3, &graph->poses3,
+      parts = InitialiseFromEdges(
+          graph->edges3, G2oPose3(), &graph->poses3,
           [](const G2oPose3& a, const G2oPose3& b) {
             G2oPose3 c;
             c.p = a.p + a.q * b.p;

@@ -159,7 +159,7 @@ TEST(FusionWildG2o, EdgesOnly3dAndUnconnectedParts) {
   EXPECT_TRUE(g.poses3.at(11).p.isApprox(Eigen::Vector3d(0, 0, 2)));
 }
 
-// Information matrices whose entries span 18 orders of magnitude (metre-level covariances
+// Information matrices whose entries span 24 orders of magnitude (metre-level covariances
 // next to nanometre ones, strong cross terms) but are positive definite are accepted and
 // solved; an indefinite one is still refused.
 TEST(FusionWildG2o, InformationSpanningManyOrdersOfMagnitudeIsAccepted) {
