@@ -309,12 +309,21 @@ def main():
                 "fusionloc.point_cloud_t": lambda: points(1, 4),
             }.get(name, lambda: T[name]())()
 
-        for name in sorted(index):
-            try:
-                payload = sample(name).encode()
-            except Exception:  # a type whose defaults do not encode (e.g. None arrays): skip
-                continue
-            write("lcm_decode", name + ".bin", bytes([index[name]]) + payload)
+        meta = T["bot_core.image_metadata_t"]()
+        meta.key = "exposure"
+        meta.value = b"12.5"
+        meta.n = len(meta.value)
+        samples_by_type = {"bot_core.image_metadata_t": meta}
+        decode_names = sorted(index)
+
+        def write_decode_seeds(extra):
+            samples_by_type.update(extra)
+            for name in decode_names:
+                try:
+                    payload = (samples_by_type[name] if name in samples_by_type else sample(name)).encode()
+                except Exception:  # a type whose defaults do not encode (None arrays): skip
+                    continue
+                write("lcm_decode", name + ".bin", bytes([index[name]]) + payload)
 
         # lcm_log: small LCM log files (lcm-logger's format).
         def event(num, utime, channel, data):
@@ -363,6 +372,8 @@ def main():
         env.orders_size = len(encoded)
         env.mac = bytes(32)
         write("procman_orders", "forged-envelope.bin", b"\x00" + env.encode())
+        write_decode_seeds({"fusionloc.procman_signed_orders_t": env, "bot_procman.orders2_t": orders,
+                            "bot_procman.command2_t": cmd, "bot_procman.sheriff_cmd2_t": dc})
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
