@@ -183,6 +183,7 @@ Status ReadG2o(std::istream& in, const std::string& name, G2oGraph* graph) {
           !NoTrailing(&ls, &error)) {
         return fail(error);
       }
+      if (i == j) return fail("edge from vertex " + std::to_string(i) + " to itself");
       G2oEdge2 e;
       e.id_i = i;
       e.id_j = j;
@@ -197,6 +198,7 @@ Status ReadG2o(std::istream& in, const std::string& name, G2oGraph* graph) {
           !ReadNumbers(&ls, 28, v, &error) || !NoTrailing(&ls, &error)) {
         return fail(error);
       }
+      if (i == j) return fail("edge from vertex " + std::to_string(i) + " to itself");
       G2oEdge3 e;
       e.id_i = i;
       e.id_j = j;
