@@ -45,7 +45,7 @@ std::vector<fs::path> Files(const fs::path& dir) {
   return out;
 }
 
-int Run(const Target& t, const fs::path& file) {
+int RunInput(const Target& t, const fs::path& file) {
   const std::string bytes = fl::test::ReadFile(file.string());
   return t.entry(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size());
 }
@@ -58,13 +58,13 @@ TEST_P(FuzzInputs, EverySeedRuns) {
   const auto files = Files(kFuzzDir / "corpus" / GetParam().name);
   ASSERT_FALSE(files.empty()) << "no seeds in tests/fuzz/corpus/" << GetParam().name
                               << " (tests/fuzz/make_corpus.py writes them)";
-  for (const auto& f : files) EXPECT_EQ(Run(GetParam(), f), 0) << f;
+  for (const auto& f : files) EXPECT_EQ(RunInput(GetParam(), f), 0) << f;
 }
 
 TEST_P(FuzzInputs, EveryKeptCrashRunsClean) {
   for (const auto& f : Files(kFuzzDir / "regressions" / GetParam().name)) {
     SCOPED_TRACE(f.string());
-    EXPECT_EQ(Run(GetParam(), f), 0) << f;
+    EXPECT_EQ(RunInput(GetParam(), f), 0) << f;
   }
 }
 
