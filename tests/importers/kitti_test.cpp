@@ -146,18 +146,23 @@ TEST(KittiTest, GroundTruthIsTheBaseFramePose) {
   EXPECT_NEAR(T_bc.translation().norm(), 0.0, 1e-12);
 }
 
+// `count` pairs 000000.png ... of `image` in root/left and root/right (odometry layout).
+void WriteOdometryPairs(const std::string& root, const std::string& left, const std::string& right,
+                        int count, const cv::Mat& image) {
+  fs::create_directories(root + "/" + left);
+  fs::create_directories(root + "/" + right);
+  for (int i = 0; i < count; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.png", i);
+    cv::imwrite(root + "/" + left + "/" + name, image);
+    cv::imwrite(root + "/" + right + "/" + name, image);
+  }
+}
+
 TEST(KittiTest, OdometryLayoutColourToGrayAndEpoch) {
   TempDir dir;
   const std::string root = dir.file("seq");
-  fs::create_directories(root + "/image_2");
-  fs::create_directories(root + "/image_3");
-  for (int i = 0; i < 2; ++i) {
-    char name[32];
-    std::snprintf(name, sizeof(name), "%06d.png", i);
-    cv::Mat img(6, 10, CV_8UC3, cv::Scalar(0, 0, 255));  // pure red (BGR)
-    cv::imwrite(root + "/image_2/" + name, img);
-    cv::imwrite(root + "/image_3/" + name, img);
-  }
+  WriteOdometryPairs(root, "image_2", "image_3", 2, cv::Mat(6, 10, CV_8UC3, cv::Scalar(0, 0, 255)));  // red
   fl::test::WriteText(root + "/times.txt", "0.000000e+00\n1.036594e-01\n");
   fl::test::WriteText(root + "/calib.txt",
                       "P0: 50 0 5 0 0 50 3 0 0 0 1 0\nP1: 50 0 5 -25 0 50 3 0 0 0 1 0\n"
@@ -317,15 +322,7 @@ TEST(KittiBadInputTest, BadTimestampsAndPoses) {
 TEST(KittiWildFilesTest, TimesLongerThanTheFramesUseTheFirstN) {
   TempDir dir;
   const std::string root = dir.file("seq");
-  fs::create_directories(root + "/image_0");
-  fs::create_directories(root + "/image_1");
-  for (int i = 0; i < 2; ++i) {
-    char name[32];
-    std::snprintf(name, sizeof(name), "%06d.png", i);
-    cv::Mat img(6, 10, CV_8UC1, cv::Scalar(90));
-    cv::imwrite(root + "/image_0/" + name, img);
-    cv::imwrite(root + "/image_1/" + name, img);
-  }
+  WriteOdometryPairs(root, "image_0", "image_1", 2, cv::Mat(6, 10, CV_8UC1, cv::Scalar(90)));
   // 5 times (and 4 poses) for the 2 frames present, as after `rm image_*/00000[2-4].png`.
   fl::test::WriteText(root + "/times.txt", "0.0\n0.1\n0.2\n0.3\n0.4\n");
   fl::test::WriteText(root + "/poses.txt",
