@@ -182,6 +182,7 @@ def main():
         stream += packet(basic(20 * k, 65500 + 30 * k, 40 * k) + bytes([0x04, 7]) + bytes(7))
     write("kobuki", "feedback.bin", b"\x5f" + stream)
     write("kobuki", "noise-then-feedback.bin", b"\x10" + bytes([0xAA, 0x55, 0x02, 0x01]) + stream[:60])
+    kobuki_stream = stream
 
     # ---- LCM messages ----
     tmp = tempfile.mkdtemp(prefix="fl_corpus_")
@@ -294,6 +295,18 @@ def main():
               b"".join(record(0, pose(k).encode()) + record(3, odom(k).encode()) for k in range(4)) +
               record(1, factor(0, 0).encode()) + record(2, factor(1, 1).encode()) + record(4, points(1).encode()) +
               record(0, pose(5).encode()))
+
+        # base_driver: BASE_COMMAND (even selector) and serial bytes (odd).
+        def command(v, omega):
+            m = T["fusionloc.base_command_t"]()
+            m.utime, m.v, m.omega = 1000000, v, omega
+            return m
+
+        half = len(kobuki_stream) // 2
+        write("base_driver", "command-feedback.bin",
+              record(0, command(0.2, 0.1).encode()) + record(1, kobuki_stream[:half]) +
+              record(0, command(0.0, 0.5).encode()) + record(1, kobuki_stream[half:]))
+        write("base_driver", "feedback-only.bin", record(1, kobuki_stream))
 
         # lcm_decode: a byte for the type, then the message.
         def sample(name):
