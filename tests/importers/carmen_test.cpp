@@ -455,9 +455,14 @@ TEST(CarmenWildFilesTest, TruncatedLastLineIsDroppedWithAWarning) {
     EXPECT_NE(s.warnings.back().find(dir.file("cut.log") + ":6"), std::string::npos)
         << s.warnings.back();
   }
-  // A complete log has nothing dropped.
+  // A complete log has nothing dropped; a last line that is complete but wrong (a bad number,
+  // too many fields) is still an error.
   fl::test::WriteText(dir.file("whole.log"), text);
   EXPECT_EQ(ReadCarmenLog(dir.file("whole.log")).dropped_last_line, 0);
+  fl::test::WriteText(dir.file("bad-last.log"), text + "ODOM 1 2 x 0 0 0 1 h 1\n");
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("bad-last.log"), dir.file("bad.lcmlog"));
+  EXPECT_NE(msg.find("bad-last.log:6: ODOM field 'theta'"), std::string::npos) << msg;
 }
 
 // CARMEN loggers print tiny values such as 9.53173e-312 (subnormal: strtod says ERANGE): they
@@ -483,7 +488,7 @@ TEST(CarmenWildFilesTest, SubnormalNumbersAreAccepted) {
                                                  " 0 0 0 10.0 host 1.0\n" +
                                                  "FLASER 3 1 1 1 0 0 0 0 0 0 11.0 host 1.0\n");
     const std::string msg =
-        ExpectConvertError(CarmenOptions{}, dir.file("bad.log"), dir.file("o.lcmlog"));
+        ExpectConvertError(CarmenOptions{}, dir.file("bad.log"), dir.file("bad.lcmlog"));
     EXPECT_NE(msg.find("bad.log:1: FLASER field 'theta'"), std::string::npos) << msg;
   }
 }

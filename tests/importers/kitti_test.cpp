@@ -350,7 +350,7 @@ TEST(KittiWildFilesTest, TimesLongerThanTheFramesUseTheFirstN) {
 
   // Fewer times than images is still an error: which frame would have no time?
   fl::test::WriteText(root + "/times.txt", "0.0\n");
-  const std::string msg = ExpectConvertError(opts, root, dir.file("o.lcmlog"));
+  const std::string msg = ExpectConvertError(opts, root, dir.file("short.lcmlog"));
   EXPECT_NE(msg.find("times.txt: 1 time stamps for 2 images"), std::string::npos) << msg;
 }
 

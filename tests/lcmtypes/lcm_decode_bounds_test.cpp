@@ -10,18 +10,25 @@
 #include <new>
 #include <vector>
 
+// GCC 12's maybe-uninitialized false positive inside lcm-gen's decode() once it is inlined
+// (as in procman/lcm/include/fusionloc/procman/bot_procman_types.hpp).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "bot_core/images_t.hpp"
 #include "bot_core/planar_lidar_t.hpp"
-#include "bot_procman/orders2_t.hpp"
-#include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/occupancy_grid_t.hpp"
 #include "fusionloc/point_cloud_t.hpp"
 #include "fusionloc/status_t.hpp"
+#pragma GCC diagnostic pop
+#include "fusionloc/common/lcm_interface.hpp"
 
 namespace {
 std::atomic<size_t> g_largest{0};
 }  // namespace
 
+// The replacement allocates with malloc and frees with free, which GCC cannot tell from
+// mixing new and free once it inlines them.
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 void* operator new(size_t size) {
   size_t seen = g_largest.load();
   while (size > seen && !g_largest.compare_exchange_weak(seen, size)) {

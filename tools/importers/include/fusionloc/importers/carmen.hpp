@@ -161,8 +161,9 @@ double CarmenBeamStep(int n, double fov_rad);
 // Reads a CARMEN log (.gz is decompressed). `timestamp` is "ipc" or "logger". Throws
 // std::runtime_error "FILE:LINE: what is wrong (fix)" on a malformed FLASER or ODOM line, a
 // missing or unreadable file, or a log without any FLASER line. Lines of every other type
-// are skipped and counted, never an error. The last line alone, if malformed (a log cut short
-// while written), is dropped with a warning naming FILE:LINE (dropped_last_line). Numbers
+// are skipped and counted, never an error. The last line alone, if incomplete (no newline at
+// its end, or fewer fields than its type needs: a log cut short while written), is dropped
+// with a warning naming FILE:LINE (dropped_last_line). Numbers
 // may be subnormal (9.53173e-312); inf and nan are errors.
 CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp = "ipc",
                         double fov_deg = 180.0);
