@@ -124,7 +124,7 @@ TEST(LcmDecodeBounds, BadStringLengthsAreRefused) {
     EXPECT_LT(DecodeCounting<fusionloc::status_t>(w, &largest), 0) << len;
     EXPECT_LT(largest, 1024u) << len;
   }
-  fusionloc::status_t ok;
+  fusionloc::status_t ok{};
   ok.process = "fl-x";
   ok.message = "fine";
   std::vector<uint8_t> bytes(static_cast<size_t>(ok.getEncodedSize()));
