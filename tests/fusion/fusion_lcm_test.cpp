@@ -9,6 +9,8 @@
 
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/fused_pose_t.hpp"
+#include "fusionloc/relative_pose_factor_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 #include "test_paths.hpp"
 
 namespace fl::fusion {
@@ -88,6 +90,46 @@ TEST(FusionNodeState, ARespawnedFusionGoesOnInItsMapFrame) {
   fused = RunFusion(state, {Pose2(2, 0, 0)});
   ASSERT_EQ(fused.size(), 1u);
   EXPECT_NEAR(fused[0].x, 2.0, 1e-9);
+}
+
+// Found by fuzzing (tests/fuzz/regressions/fusion_node/odometry-utime-overflow): odometry,
+// poses, factors or points stamped near the ends of int64 made the fusion's time differences
+// overflow (undefined behaviour). They are refused and counted; the good ones still fuse.
+TEST(FusionNodeInput, TimeStampsOutOfRangeAreDroppedAndCounted) {
+  auto lcm = MakeLcm("memq://");
+  std::vector<fusionloc::fused_pose_t> fused;
+  lcm->Subscribe<fusionloc::fused_pose_t>(
+      channels::kFusedPose,
+      [&](const fusionloc::fused_pose_t& m, const std::string&) { fused.push_back(m); });
+  FusionNodeOptions options;
+  options.map_out = "";
+  options.sync_full_solve = true;
+  FusionNode node(FusionProcessConfig(), options, lcm.get(), ChannelMap());
+  const auto handle = [&] {
+    while (lcm->HandleSubscriptions(0) > 0) {
+    }
+  };
+  fusionloc::wheel_odometry_t odo{};
+  for (const Utime t : {Utime{1000000}, Utime{1100000}, INT64_MIN + 1000000}) {
+    odo.utime = t;
+    lcm->Publish(channels::kOdometry, odo, 0);
+    handle();
+  }
+  lcm->Publish(channels::kRbpfPose, RbpfPose(INT64_MAX - 5, Pose2(0, 0, 0)), 0);
+  fusionloc::relative_pose_factor_t factor{};
+  factor.utime_i = INT64_MIN;
+  factor.utime_j = 1000000;
+  factor.quat[0] = 1.0;
+  for (int i = 0; i < 6; ++i) factor.information[7 * i] = 1.0;
+  lcm->Publish(channels::kVoFactors, factor, 0);
+  handle();
+  EXPECT_EQ(node.status().dropped(), 3);
+  EXPECT_TRUE(fused.empty());
+  lcm->Publish(channels::kRbpfPose, RbpfPose(1050000, Pose2(1, 0, 0)), 0);
+  handle();
+  ASSERT_EQ(fused.size(), 1u);
+  EXPECT_NEAR(fused[0].x, 1.0, 1e-9);
+  EXPECT_EQ(node.status().dropped(), 3);
 }
 
 }  // namespace
