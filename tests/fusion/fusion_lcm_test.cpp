@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <vector>
 
 #include "fusionloc/common/channels.hpp"
@@ -23,26 +24,37 @@ bot_core::pose_t RbpfPose(Utime utime, const Pose2& T) {
   return m;
 }
 
-// Runs a live (memq://) FusionNode with `state_file` over RBPF poses; returns its fused poses.
-std::vector<fusionloc::fused_pose_t> RunFusion(const std::string& state_file,
-                                               const std::vector<Pose2>& rbpf) {
-  auto lcm = MakeLcm("memq://");
-  std::vector<fusionloc::fused_pose_t> fused;
-  lcm->Subscribe<fusionloc::fused_pose_t>(
-      channels::kFusedPose,
-      [&](const fusionloc::fused_pose_t& m, const std::string&) { fused.push_back(m); });
-  FusionNodeOptions options;
-  options.map_out = "";
-  options.sync_full_solve = true;
-  options.state_file = state_file;
-  FusionNode node(FusionProcessConfig(), options, lcm.get(), ChannelMap());
-  for (size_t k = 0; k < rbpf.size(); ++k) {
-    lcm->Publish(channels::kRbpfPose, RbpfPose(1000000 + 1000000 * static_cast<Utime>(k), rbpf[k]),
-                 0);
+// A live (memq://) FusionNode (inline solves, no map file) and the fused poses it publishes.
+struct LiveFusion {
+  explicit LiveFusion(const std::string& state_file = "") : lcm(MakeLcm("memq://")) {
+    lcm->Subscribe<fusionloc::fused_pose_t>(
+        channels::kFusedPose,
+        [this](const fusionloc::fused_pose_t& m, const std::string&) { fused.push_back(m); });
+    FusionNodeOptions options;
+    options.map_out = "";
+    options.sync_full_solve = true;
+    options.state_file = state_file;
+    node = std::make_unique<FusionNode>(FusionProcessConfig(), options, lcm.get(), ChannelMap());
+  }
+  template <class Msg>
+  void Send(const std::string& channel, const Msg& msg) {
+    lcm->Publish(channel, msg, 0);
     while (lcm->HandleSubscriptions(0) > 0) {
     }
   }
-  return fused;
+  std::unique_ptr<LcmInterface> lcm;
+  std::vector<fusionloc::fused_pose_t> fused;
+  std::unique_ptr<FusionNode> node;
+};
+
+// Runs a LiveFusion with `state_file` over RBPF poses; returns its fused poses.
+std::vector<fusionloc::fused_pose_t> RunFusion(const std::string& state_file,
+                                               const std::vector<Pose2>& rbpf) {
+  LiveFusion f(state_file);
+  for (size_t k = 0; k < rbpf.size(); ++k) {
+    f.Send(channels::kRbpfPose, RbpfPose(1000000 + 1000000 * static_cast<Utime>(k), rbpf[k]));
+  }
+  return f.fused;
 }
 
 TEST(FusionNodeState, FormatAndParse) {
@@ -96,40 +108,25 @@ TEST(FusionNodeState, ARespawnedFusionGoesOnInItsMapFrame) {
 // poses, factors or points stamped near the ends of int64 made the fusion's time differences
 // overflow (undefined behaviour). They are refused and counted; the good ones still fuse.
 TEST(FusionNodeInput, TimeStampsOutOfRangeAreDroppedAndCounted) {
-  auto lcm = MakeLcm("memq://");
-  std::vector<fusionloc::fused_pose_t> fused;
-  lcm->Subscribe<fusionloc::fused_pose_t>(
-      channels::kFusedPose,
-      [&](const fusionloc::fused_pose_t& m, const std::string&) { fused.push_back(m); });
-  FusionNodeOptions options;
-  options.map_out = "";
-  options.sync_full_solve = true;
-  FusionNode node(FusionProcessConfig(), options, lcm.get(), ChannelMap());
-  const auto handle = [&] {
-    while (lcm->HandleSubscriptions(0) > 0) {
-    }
-  };
+  LiveFusion f;
   fusionloc::wheel_odometry_t odo{};
   for (const Utime t : {Utime{1000000}, Utime{1100000}, INT64_MIN + 1000000}) {
     odo.utime = t;
-    lcm->Publish(channels::kOdometry, odo, 0);
-    handle();
+    f.Send(channels::kOdometry, odo);
   }
-  lcm->Publish(channels::kRbpfPose, RbpfPose(INT64_MAX - 5, Pose2(0, 0, 0)), 0);
+  f.Send(channels::kRbpfPose, RbpfPose(INT64_MAX - 5, Pose2(0, 0, 0)));
   fusionloc::relative_pose_factor_t factor{};
   factor.utime_i = INT64_MIN;
   factor.utime_j = 1000000;
   factor.quat[0] = 1.0;
   for (int i = 0; i < 6; ++i) factor.information[7 * i] = 1.0;
-  lcm->Publish(channels::kVoFactors, factor, 0);
-  handle();
-  EXPECT_EQ(node.status().dropped(), 3);
-  EXPECT_TRUE(fused.empty());
-  lcm->Publish(channels::kRbpfPose, RbpfPose(1050000, Pose2(1, 0, 0)), 0);
-  handle();
-  ASSERT_EQ(fused.size(), 1u);
-  EXPECT_NEAR(fused[0].x, 1.0, 1e-9);
-  EXPECT_EQ(node.status().dropped(), 3);
+  f.Send(channels::kVoFactors, factor);
+  EXPECT_EQ(f.node->status().dropped(), 3);
+  EXPECT_TRUE(f.fused.empty());
+  f.Send(channels::kRbpfPose, RbpfPose(1050000, Pose2(1, 0, 0)));
+  ASSERT_EQ(f.fused.size(), 1u);
+  EXPECT_NEAR(f.fused[0].x, 1.0, 1e-9);
+  EXPECT_EQ(f.node->status().dropped(), 3);
 }
 
 }  // namespace
