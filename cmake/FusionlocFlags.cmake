@@ -5,9 +5,12 @@
 # Options:
 #   FL_SANITIZE=ON      build everything with AddressSanitizer + UBSan.
 #   FL_WERROR=ON        turn warnings into errors (CI uses this).
+#   FL_FUZZ=ON          clang only: instrument everything for libFuzzer + ASan + UBSan and
+#                       add the fuzz targets fl-fuzz-* (tests/fuzz; `./fusionloc fuzz`).
 
 option(FL_SANITIZE "Build with address and undefined-behaviour sanitizers" OFF)
 option(FL_WERROR "Treat compiler warnings as errors" OFF)
+option(FL_FUZZ "Build the libFuzzer targets (clang; tests/fuzz)" OFF)
 
 find_program(FL_CCACHE ccache)
 if(FL_CCACHE)
@@ -28,6 +31,19 @@ if(FL_SANITIZE)
   # Eigen turns off its "malloc is already aligned" assumption under ASan, which makes Eigen
   # heap objects allocated inside the (uninstrumented) Ceres library unfreeable from ours;
   # glibc and ASan both return 16-byte aligned memory on x86-64, so keep the assumption.
+  add_compile_definitions(EIGEN_MALLOC_ALREADY_ALIGNED=1)
+endif()
+
+if(FL_FUZZ)
+  if(NOT CMAKE_CXX_COMPILER_ID MATCHES "Clang")
+    message(FATAL_ERROR "FL_FUZZ=ON needs clang (libFuzzer): configure with "
+                        "CC=clang-14 CXX=clang++-14, or use ./fusionloc fuzz")
+  endif()
+  # Coverage for libFuzzer in every library; ASan and UBSan, UB aborting (a finding) instead of
+  # printing and going on. vptr and the Eigen alignment: as FL_SANITIZE above.
+  add_compile_options(-fsanitize=fuzzer-no-link,address,undefined -fno-sanitize=vptr
+                      -fno-sanitize-recover=undefined -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined -fno-sanitize=vptr)
   add_compile_definitions(EIGEN_MALLOC_ALREADY_ALIGNED=1)
 endif()
 

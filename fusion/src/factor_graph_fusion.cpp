@@ -434,7 +434,7 @@ bool FactorGraphFusion::OdometryAt(Utime t, Pose2* T_odom_base) const {
   if (it == odometry_.begin()) return false;
   const OdomSample& a = *(it - 1);
   const OdomSample& b = *it;
-  if (UtimeToSeconds(b.utime - a.utime) > options_.odom_max_gap_s) return false;
+  if (SecondsBetween(a.utime, b.utime) > options_.odom_max_gap_s) return false;
   const double alpha = static_cast<double>(t - a.utime) / static_cast<double>(b.utime - a.utime);
   *T_odom_base = Interpolate(a.T_odom_base, b.T_odom_base, alpha);
   return true;

@@ -97,7 +97,10 @@ std::vector<Eigen::Vector3f> PointMap::Build(const std::function<bool(Utime, Pos
   all->points.reserve(static_cast<size_t>(std::min<int64_t>(impl_->points, options_.max_points)));
   for (const auto& [utime, cloud] : impl_->keyframes) {
     Pose2 T_map_base;
-    if (!pose_at(utime, &T_map_base)) {
+    // A pose beyond kMaxMapExtentM (or not finite) comes from a corrupt input upstream: its
+    // points would not even be finite floats; the keyframe is skipped.
+    if (!pose_at(utime, &T_map_base) || !(std::abs(T_map_base.x) <= kMaxMapExtentM) ||
+        !(std::abs(T_map_base.y) <= kMaxMapExtentM) || !std::isfinite(T_map_base.theta)) {
       if (skipped) ++*skipped;
       continue;
     }

@@ -53,6 +53,26 @@ TEST(SqrtInformation, RejectsBadMatrices) {
   EXPECT_FALSE(SqrtInformation<3>(m, &s));
   EXPECT_FALSE(SqrtInformation<3>(Eigen::Matrix3d::Zero(), &s));
   EXPECT_TRUE(s.isApprox(Eigen::Matrix3d::Constant(7.0)));  // left unchanged
+  m << 1, 1, 0, 1, 1, 0, 0, 0, 1;  // rows 0 and 1 dependent
+  EXPECT_FALSE(SqrtInformation<3>(m, &s));
+  m << 1e12, 1e12 * (1 - 1e-14), 0, 1e12 * (1 - 1e-14), 1e12, 0, 0, 0, 1;  // nearly so
+  EXPECT_FALSE(SqrtInformation<3>(m, &s));
+}
+
+// Positive definite information whose entries span 24 orders of magnitude (a real-file case,
+// docs/RELIABILITY.md) is accepted, and S still gives Ω back.
+TEST(SqrtInformation, AcceptsEntriesSpanningManyOrdersOfMagnitude) {
+  Eigen::Matrix3d omega;
+  omega << 1e15, 1e4, 0, 1e4, 1e-2, 1e-6, 0, 1e-6, 1e-9;
+  Eigen::Matrix3d s;
+  ASSERT_TRUE(SqrtInformation<3>(omega, &s));
+  const Eigen::Matrix3d back = s.transpose() * s;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(back(r, c), omega(r, c), 1e-9 * std::sqrt(omega(r, r) * omega(c, c))) << r << c;
+    }
+  }
+  EXPECT_TRUE(SqrtInformation<3>(Eigen::Vector3d(1e15, 1.0, 1e-9).asDiagonal().toDenseMatrix(), &s));
 }
 
 TEST(SqrtInformation, SymmetricPartOfANearlySymmetricMatrix) {

@@ -8,10 +8,13 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <vector>
 
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/fused_pose_t.hpp"
+#include "fusionloc/relative_pose_factor_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 #include "test_paths.hpp"
 
 namespace fl::fusion {
@@ -74,6 +77,36 @@ FusionRun RunFusion(const std::string& journal, int first, int last, bool finish
     }
   }
   return run;
+}
+
+// The RBPF pose message at `utime`.
+bot_core::pose_t RbpfPoseMessage(Utime utime, const Pose2& T) {
+  bot_core::pose_t m{};
+  m.utime = utime;
+  IsometryToArrays(T.ToIsometry3(), m.pos, m.orientation);
+  return m;
+}
+
+// A live (memq://) FusionNode (inline solves, no map file) and the fused poses it publishes.
+struct LiveFusion {
+  LiveFusion() : lcm(MakeLcm("memq://")) {
+    lcm->Subscribe<fusionloc::fused_pose_t>(
+        channels::kFusedPose,
+        [this](const fusionloc::fused_pose_t& m, const std::string&) { fused.push_back(m); });
+    FusionNodeOptions options;
+    options.map_out = "";
+    options.sync_full_solve = true;
+    node = std::make_unique<FusionNode>(FusionProcessConfig(), options, lcm.get(), ChannelMap());
+  }
+  template <class Msg>
+  void Send(const std::string& channel, const Msg& msg) {
+    lcm->Publish(channel, msg, 0);
+    while (lcm->HandleSubscriptions(0) > 0) {
+    }
+  }
+  std::unique_ptr<LcmInterface> lcm;
+  std::vector<fusionloc::fused_pose_t> fused;
+  std::unique_ptr<FusionNode> node;
 }
 
 double Distance(const fusionloc::fused_pose_t& m, const Pose2& T) {
@@ -162,6 +195,31 @@ TEST(FusionNodeJournal, AnOldJournalOrAnotherRunsStartsANewGraph) {
   after = RunFusion(journal, 20, kSteps, true);
   ASSERT_FALSE(after.poses.empty());
   EXPECT_EQ(after.poses.front().num_nodes, 1);
+}
+
+// Found by fuzzing (tests/fuzz/regressions/fusion_node/odometry-utime-overflow): odometry,
+// poses, factors or points stamped near the ends of int64 made the fusion's time differences
+// overflow (undefined behaviour). They are refused and counted; the good ones still fuse.
+TEST(FusionNodeInput, TimeStampsOutOfRangeAreDroppedAndCounted) {
+  LiveFusion f;
+  fusionloc::wheel_odometry_t odo{};
+  for (const Utime t : {Utime{1000000}, Utime{1100000}, INT64_MIN + 1000000}) {
+    odo.utime = t;
+    f.Send(channels::kOdometry, odo);
+  }
+  f.Send(channels::kRbpfPose, RbpfPoseMessage(INT64_MAX - 5, Pose2(0, 0, 0)));
+  fusionloc::relative_pose_factor_t factor{};
+  factor.utime_i = INT64_MIN;
+  factor.utime_j = 1000000;
+  factor.quat[0] = 1.0;
+  for (int i = 0; i < 6; ++i) factor.information[7 * i] = 1.0;
+  f.Send(channels::kVoFactors, factor);
+  EXPECT_EQ(f.node->status().dropped(), 3);
+  EXPECT_TRUE(f.fused.empty());
+  f.Send(channels::kRbpfPose, RbpfPoseMessage(1050000, Pose2(1, 0, 0)));
+  ASSERT_EQ(f.fused.size(), 1u);
+  EXPECT_NEAR(f.fused[0].x, 1.0, 1e-9);
+  EXPECT_EQ(f.node->status().dropped(), 3);
 }
 
 }  // namespace

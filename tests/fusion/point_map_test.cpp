@@ -44,6 +44,28 @@ TEST(FusionPointMap, PlacesKeyframesByPoseAndVoxelFilters) {
   EXPECT_EQ(none.size(), 1u);
 }
 
+// Found by fuzzing the fusion node (tests/fuzz/regressions/fusion_node/huge-pose-voxel-key):
+// a keyframe placed at a huge or non-finite pose (from corrupt RBPF_POSE / factor values)
+// gave infinite map points, whose voxel-tile index was an out-of-range cast (undefined
+// behaviour). Such keyframes are skipped and counted; the rest of the map is built.
+TEST(FusionPointMap, KeyframesAtAbsurdPosesAreSkipped) {
+  PointMap map(PointMapOptions{});
+  for (Utime t : {1, 2, 3, 4}) ASSERT_TRUE(map.AddKeyframe(t, {Eigen::Vector3f(1, 0, 0)}).ok());
+  int skipped = -1;
+  const auto points = map.Build(
+      [](Utime t, Pose2* p) {
+        if (t == 1) *p = Pose2(1e300, 0, 0);
+        if (t == 2) *p = Pose2(0, -1e7, 0);
+        if (t == 3) *p = Pose2(0, 0, std::nan(""));
+        if (t == 4) *p = Pose2(2, 0, 0);
+        return true;
+      },
+      &skipped);
+  EXPECT_EQ(skipped, 3);
+  ASSERT_EQ(points.size(), 1u);
+  EXPECT_NEAR(points[0].x(), 3.0f, 0.1f);
+}
+
 TEST(FusionPointMap, BadPointsAndDuplicateKeyframesAreRejected) {
   PointMap map(PointMapOptions{});
   const float nan = std::nanf("");

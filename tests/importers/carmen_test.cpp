@@ -275,7 +275,8 @@ TEST(CarmenTest, RobotLaser1Lines) {
 
   // Cut short, and mixed with FLASER lines: errors naming the file (and line).
   const std::string cut = RobotLaser(4, 4, 0.0, 5.0);
-  fl::test::WriteText(dir.file("cut.log"), RobotLaser(4, 4, 0.0, 4.0) + cut.substr(0, 40) + "\n");
+  fl::test::WriteText(dir.file("cut.log"),
+                      RobotLaser(4, 4, 0.0, 4.0) + cut.substr(0, 40) + "\n" + cut);
   const std::string msg =
       ExpectConvertError(CarmenOptions{}, dir.file("cut.log"), dir.file("p.lcmlog"));
   EXPECT_NE(msg.find("cut.log:2: truncated ROBOTLASER1 line"), std::string::npos) << msg;
@@ -424,12 +425,101 @@ TEST(CarmenBadInputTest, TruncatedLineNamesFileAndLine) {
   TempDir dir;
   std::string text = fl::test::CarmenArcLog(3);  // lines 1-2 header, 3-5 scans
   const std::string line = fl::test::CarmenFlaser(181, 2.0, 0, 0, 0, 50.0);
-  text += line.substr(0, line.size() / 2) + "\n";  // line 6: cut short
+  text += line.substr(0, line.size() / 2) + "\n";  // line 6: cut short, and more follows
+  text += fl::test::CarmenFlaser(181, 2.0, 0, 0, 0, 51.0);
   fl::test::WriteText(dir.file("cut.log"), text);
   const std::string msg =
       ExpectConvertError(CarmenOptions{}, dir.file("cut.log"), dir.file("o.lcmlog"));
   EXPECT_NE(msg.find(dir.file("cut.log") + ":6:"), std::string::npos) << msg;
   EXPECT_NE(msg.find("truncated FLASER line"), std::string::npos) << msg;
+}
+
+// Real files in the wild (docs/RELIABILITY.md).
+
+// A log cut short while it was written: its incomplete last line is dropped with a warning
+// naming FILE:LINE, and everything before it converted.
+TEST(CarmenWildFilesTest, TruncatedLastLineIsDroppedWithAWarning) {
+  TempDir dir;
+  std::string text = fl::test::CarmenArcLog(3);  // lines 1-2 header, 3-5 scans
+  const std::string line = fl::test::CarmenFlaser(181, 2.0, 0, 0, 0, 50.0);
+  for (const std::string& cut : {line.substr(0, line.size() / 2),       // no newline at all
+                                 line.substr(0, line.size() / 2) + "\n",  // cut at a field
+                                 std::string("ODOM 1.0 2.0 0.1 0")}) {
+    fl::test::WriteText(dir.file("cut.log"), text + cut);
+    const CarmenLog log = ReadCarmenLog(dir.file("cut.log"));
+    EXPECT_EQ(log.scans.size(), 3u) << cut;
+    EXPECT_EQ(log.dropped_last_line, 6) << cut;
+    const ConvertSummary s = ConvertCarmen(CarmenOptions{}, dir.file("cut.log"), dir.file("o.lcmlog"));
+    EXPECT_EQ(s.messages.at(channels::kLaser), 3);
+    ASSERT_FALSE(s.warnings.empty());
+    EXPECT_NE(s.warnings.back().find(dir.file("cut.log") + ":6"), std::string::npos)
+        << s.warnings.back();
+  }
+  // A complete log has nothing dropped; a last line that is complete but wrong (a bad number,
+  // too many fields) is still an error.
+  fl::test::WriteText(dir.file("whole.log"), text);
+  EXPECT_EQ(ReadCarmenLog(dir.file("whole.log")).dropped_last_line, 0);
+  fl::test::WriteText(dir.file("bad-last.log"), text + "ODOM 1 2 x 0 0 0 1 h 1\n");
+  const std::string msg =
+      ExpectConvertError(CarmenOptions{}, dir.file("bad-last.log"), dir.file("bad.lcmlog"));
+  EXPECT_NE(msg.find("bad-last.log:6: ODOM field 'theta'"), std::string::npos) << msg;
+}
+
+// CARMEN loggers print tiny values such as 9.53173e-312 (subnormal: strtod says ERANGE): they
+// are numbers and are read; inf, nan and overflow are still errors naming the field.
+TEST(CarmenWildFilesTest, SubnormalNumbersAreAccepted) {
+  TempDir dir;
+  fl::test::WriteText(dir.file("sub.log"),
+                      "FLASER 3 1.0 2.0 3.0 0 0 9.53173e-312 4.9e-324 0 -2.2e-310 10.0 host 1e-320\n"
+                      "ODOM 1e-315 0 0 0 0 0 10.5 host 1e-400\n");
+  const CarmenLog log = ReadCarmenLog(dir.file("sub.log"));
+  ASSERT_EQ(log.scans.size(), 1u);
+  EXPECT_DOUBLE_EQ(log.scans[0].pose.theta, 9.53173e-312);
+  EXPECT_GT(log.scans[0].pose.theta, 0.0);
+  EXPECT_LT(log.scans[0].odom.theta, 0.0);
+  EXPECT_EQ(log.scans[0].utime, 10000000);
+  ASSERT_EQ(log.odom.size(), 1u);
+  EXPECT_DOUBLE_EQ(log.odom[0].pose.x, 1e-315);
+  EXPECT_EQ(ConvertCarmen(CarmenOptions{}, dir.file("sub.log"), dir.file("o.lcmlog"))
+                .messages.at(channels::kLaser),
+            1);
+  for (const char* bad : {"inf", "nan", "1e400", "-1e999"}) {
+    fl::test::WriteText(dir.file("bad.log"), std::string("FLASER 3 1.0 2.0 3.0 0 0 ") + bad +
+                                                 " 0 0 0 10.0 host 1.0\n" +
+                                                 "FLASER 3 1 1 1 0 0 0 0 0 0 11.0 host 1.0\n");
+    const std::string msg =
+        ExpectConvertError(CarmenOptions{}, dir.file("bad.log"), dir.file("bad.lcmlog"));
+    EXPECT_NE(msg.find("bad.log:1: FLASER field 'theta'"), std::string::npos) << msg;
+  }
+}
+
+// Lines the conversion ignores (other message types, comments, blank or odd lines) never
+// abort it, whatever they hold; they are counted per type.
+TEST(CarmenWildFilesTest, IgnoredLinesNeverAbortTheConversion) {
+  TempDir dir;
+  std::string text = "# CARMEN Logfile\r\n";
+  text += "PARAM robot_front_laser_max 81.9 nohost 0.0\r\n";
+  text += "   \t  \n\n";
+  text += "RAWLASER1 0 -1.57 3.14 0.0174 81.9 0.01 0 3 x y z 0 123.4 host 1e-400\n";
+  text += "NEFF nan inf -\n";
+  text += "SYNC\n";
+  text += "TRUEPOS 1 2 3 4 5 6 " + std::string(20000, '9') + "\n";  // longer than a read buffer
+  text += std::string("\x01\x02\xff\xfe garbage\n");
+  text += "  # an indented comment FLASER 1 x\n";
+  text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 10.0);
+  text += "flaser 3 not FLASER (case matters)\n";
+  text += fl::test::CarmenFlaser(5, 1.0, 0.1, 0, 0, 10.1);
+  fl::test::WriteText(dir.file("odd.log"), text);
+  const CarmenLog log = ReadCarmenLog(dir.file("odd.log"));
+  EXPECT_EQ(log.scans.size(), 2u);
+  EXPECT_EQ(log.skipped_types.at("PARAM"), 1);
+  EXPECT_EQ(log.skipped_types.at("RAWLASER1"), 1);
+  EXPECT_EQ(log.skipped_types.at("NEFF"), 1);
+  EXPECT_EQ(log.skipped_types.at("TRUEPOS"), 1);
+  EXPECT_EQ(log.skipped_types.at("flaser"), 1);
+  EXPECT_EQ(log.dropped_last_line, 0);
+  const ConvertSummary s = ConvertCarmen(CarmenOptions{}, dir.file("odd.log"), dir.file("o.lcmlog"));
+  EXPECT_EQ(s.messages.at(channels::kLaser), 2);
 }
 
 TEST(CarmenBadInputTest, NonNumericField) {

@@ -146,18 +146,23 @@ TEST(KittiTest, GroundTruthIsTheBaseFramePose) {
   EXPECT_NEAR(T_bc.translation().norm(), 0.0, 1e-12);
 }
 
+// `count` pairs 000000.png ... of `image` in root/left and root/right (odometry layout).
+void WriteOdometryPairs(const std::string& root, const std::string& left, const std::string& right,
+                        int count, const cv::Mat& image) {
+  fs::create_directories(root + "/" + left);
+  fs::create_directories(root + "/" + right);
+  for (int i = 0; i < count; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.png", i);
+    cv::imwrite(root + "/" + left + "/" + name, image);
+    cv::imwrite(root + "/" + right + "/" + name, image);
+  }
+}
+
 TEST(KittiTest, OdometryLayoutColourToGrayAndEpoch) {
   TempDir dir;
   const std::string root = dir.file("seq");
-  fs::create_directories(root + "/image_2");
-  fs::create_directories(root + "/image_3");
-  for (int i = 0; i < 2; ++i) {
-    char name[32];
-    std::snprintf(name, sizeof(name), "%06d.png", i);
-    cv::Mat img(6, 10, CV_8UC3, cv::Scalar(0, 0, 255));  // pure red (BGR)
-    cv::imwrite(root + "/image_2/" + name, img);
-    cv::imwrite(root + "/image_3/" + name, img);
-  }
+  WriteOdometryPairs(root, "image_2", "image_3", 2, cv::Mat(6, 10, CV_8UC3, cv::Scalar(0, 0, 255)));  // red
   fl::test::WriteText(root + "/times.txt", "0.000000e+00\n1.036594e-01\n");
   fl::test::WriteText(root + "/calib.txt",
                       "P0: 50 0 5 0 0 50 3 0 0 0 1 0\nP1: 50 0 5 -25 0 50 3 0 0 0 1 0\n"
@@ -310,6 +315,68 @@ TEST(KittiBadInputTest, BadTimestampsAndPoses) {
   EXPECT_NE(msg3.find("poses_cam0_from_oxts.txt:2: the 3x3 part is not a rotation"),
             std::string::npos)
       << msg3;
+}
+
+// Real files in the wild (docs/RELIABILITY.md): a folder whose images were trimmed but whose
+// times.txt (and pose file) were not. The first N entries are used, with a warning.
+TEST(KittiWildFilesTest, TimesLongerThanTheFramesUseTheFirstN) {
+  TempDir dir;
+  const std::string root = dir.file("seq");
+  WriteOdometryPairs(root, "image_0", "image_1", 2, cv::Mat(6, 10, CV_8UC1, cv::Scalar(90)));
+  // 5 times (and 4 poses) for the 2 frames present, as after `rm image_*/00000[2-4].png`.
+  fl::test::WriteText(root + "/times.txt", "0.0\n0.1\n0.2\n0.3\n0.4\n");
+  fl::test::WriteText(root + "/poses.txt",
+                      "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0.5 0 1 0 0 0 0 1 0\n"
+                      "1 0 0 1.0 0 1 0 0 0 0 1 0\n1 0 0 1.5 0 1 0 0 0 0 1 0\n");
+  fl::test::WriteText(root + "/calib.txt",
+                      "P0: 50 0 5 0 0 50 3 0 0 0 1 0\nP1: 50 0 5 -25 0 50 3 0 0 0 1 0\n");
+  KittiOptions opts;
+  opts.poses_file = root + "/poses.txt";
+  const KittiSequence seq = ScanKittiFolder(opts, root);
+  ASSERT_EQ(seq.utimes.size(), 2u);
+  EXPECT_EQ(seq.utimes[1], kKittiOdometryEpochUtime + 100000);
+  ASSERT_EQ(seq.T_cam0start_cam0.size(), 2u);
+  EXPECT_NEAR(seq.T_cam0start_cam0[1].translation().x(), 0.5, 1e-12);
+  ASSERT_EQ(seq.warnings.size(), 2u);
+  EXPECT_NE(seq.warnings[0].find("times.txt: 5 time stamps for 2 images"), std::string::npos)
+      << seq.warnings[0];
+  EXPECT_NE(seq.warnings[0].find("using the first 2"), std::string::npos) << seq.warnings[0];
+  EXPECT_NE(seq.warnings[1].find("poses.txt: 4 poses for 2 frames"), std::string::npos)
+      << seq.warnings[1];
+  const ConvertSummary s = ConvertKitti(opts, root, dir.file("o.lcmlog"));
+  EXPECT_EQ(s.messages.at(channels::kStereo), 2);
+  EXPECT_EQ(s.messages.at(channels::kGroundTruth), 2);
+  EXPECT_EQ(s.warnings.size(), 2u);
+
+  // Fewer times than images is still an error: which frame would have no time?
+  fl::test::WriteText(root + "/times.txt", "0.0\n");
+  const std::string msg = ExpectConvertError(opts, root, dir.file("short.lcmlog"));
+  EXPECT_NE(msg.find("times.txt: 1 time stamps for 2 images"), std::string::npos) << msg;
+}
+
+// The text parsers on their own (the fuzz targets' entry points).
+TEST(KittiTest, TextParsersNameTheFileAndLine) {
+  EXPECT_EQ(ParseKittiTimes("0\n\n0.5\n", "t.txt").size(), 2u);
+  try {
+    ParseKittiTimes("0\n-1\n", "t.txt");
+    FAIL() << "a negative time was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("t.txt:2: time -1 s is not in [0, 1e9]"),
+              std::string::npos)
+        << e.what();
+  }
+  // An image size too large for an int is refused, not cast (undefined behaviour).
+  const std::string calib =
+      "S_rect_00: 1e10 375\nS_rect_01: 1e10 375\n"
+      "P_rect_00: 50 0 5 0 0 50 3 0 0 0 1 0\nP_rect_01: 50 0 5 -25 0 50 3 0 0 0 1 0\n";
+  EXPECT_THROW(ParseKittiCalibration(calib, "c.txt", true, false), std::runtime_error);
+  const KittiCalibration c = ParseKittiCalibration(
+      "S_rect_00: 64 48\nS_rect_01: 64 48\n"
+      "P_rect_00: 50 0 5 0 0 50 3 0 0 0 1 0\nP_rect_01: 50 0 5 -25 0 50 3 0 0 0 1 0\n",
+      "c.txt", true, false);
+  EXPECT_EQ(c.width, 64);
+  EXPECT_EQ(c.height, 48);
+  EXPECT_DOUBLE_EQ(c.baseline, 0.5);
 }
 
 TEST(KittiBadInputTest, NoGroundTruthNeedsAnExplicitChoice) {

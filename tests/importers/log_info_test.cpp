@@ -33,6 +33,27 @@ TEST(LogInfoTest, KnowsEveryProjectTypeByFingerprint) {
   for (const auto& t : KnownLcmTypes()) EXPECT_EQ(FindLcmType(t.fingerprint), &t) << t.name;
 }
 
+// Found by fuzzing (tests/fuzz/regressions/lcm_log/utime-span-overflow): time stamps far apart
+// (a corrupt or hostile log) made the span overflow int64 (undefined behaviour); it is the
+// right, positive number of seconds.
+TEST(LogInfoTest, SpanOfFarApartTimeStampsDoesNotOverflow) {
+  TempDir dir;
+  const std::string path = dir.file("far.lcmlog");
+  {
+    LcmLogWriter w(path);
+    bot_core::pose_t pose{};
+    w.Write("POSE", pose, -9000000000000000000LL);
+    w.Write("POSE", pose, 9000000000000000000LL);
+    w.Close();
+  }
+  const LogInfo info = InspectLcmLog(path);
+  ASSERT_EQ(info.events, 2);
+  EXPECT_NE(info.ToText().find("(span 18000000000000.000 s)"), std::string::npos) << info.ToText();
+  EXPECT_NE(info.ToJson().find("\"span_s\": 1.8e+13"), std::string::npos) << info.ToJson();
+  ASSERT_EQ(info.channels.size(), 1u);
+  EXPECT_NEAR(info.channels[0].rate_hz(), 1.0 / 1.8e13, 1e-20);
+}
+
 TEST(LogInfoTest, CountsRatesTypesAndProblems) {
   TempDir dir;
   const std::string path = dir.file("a.lcmlog");

@@ -58,7 +58,14 @@ TEST(ImporterProgramsTest, CarmenConvertsAndFailsCleanly) {
   EXPECT_NE(ok.out.find("GROUND_TRUTH: 20"), std::string::npos) << ok.out;
 
   std::string text = fl::test::CarmenArcLog(3);
-  text += "FLASER 3 1 2\n";
+  // Cut short at the end (the log was cut while written): dropped with a warning naming it.
+  fl::test::WriteText(dir.file("cut-end.log"), text + "FLASER 3 1 2\n");
+  const Result end = RunProgram(dir, "fl-carmen2lcm cut-end.log end.lcmlog");
+  EXPECT_EQ(end.status, 0) << end.err;
+  EXPECT_NE(end.err.find("cut-end.log:6: truncated FLASER line"), std::string::npos) << end.err;
+  EXPECT_TRUE(fs::exists(dir.file("end.lcmlog")));
+  // Cut short in the middle: an error.
+  text += "FLASER 3 1 2\n" + fl::test::CarmenFlaser(3, 1.0, 0, 0, 0, 5.0);
   fl::test::WriteText(dir.file("cut.log"), text);
   const Result bad = RunProgram(dir, "fl-carmen2lcm cut.log out.lcmlog");
   EXPECT_EQ(bad.status, 1);

@@ -191,5 +191,27 @@ TEST(RbpfSlamNode, TheFirstScansWaitForTheMountingAndNoneIsLost) {
   EXPECT_NE(log.find("identity T_base_laser"), std::string::npos) << log;
 }
 
+// Found by fuzzing (tests/fuzz/regressions/rbpf_node/): odometry 4e8 m (or 1e169 m) from its
+// origin put the robot where the grid has no cell (out-of-range int casts in the map and the
+// scan matcher). The node drops such odometry, and a laser mounting 1e9 m away, and counts them.
+TEST(RbpfSlamNodeInput, AbsurdOdometryAndMountingAreDroppedAndCounted) {
+  auto lcm = MakeLcm("memq://");
+  RbpfSlamNode node(RbpfSlamOptions{}, RbpfSlamNodeOptions{}, lcm.get(), ChannelMap());
+  bot_core::rigid_transform_t mount{};
+  mount.trans[0] = 1e9;
+  mount.quat[0] = 1.0;
+  lcm->Publish(channels::kLaserToBase, mount, 0);
+  fusionloc::wheel_odometry_t odo{};
+  odo.utime = 1000000;
+  for (const double x : {4.3e8, -2.3e169, std::nan(""), 1.0}) {
+    odo.x = x;
+    odo.utime += 100000;
+    lcm->Publish(channels::kOdometry, odo, 0);
+  }
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  EXPECT_EQ(node.status().dropped(), 4);
+}
+
 }  // namespace
 }  // namespace fl::rbpf

@@ -21,6 +21,22 @@ GridOptions Opts() {
 // Makes cell (cx, cy) an obstacle (one hit is above the threshold).
 void MakeObstacle(TiledGrid* g, int cx, int cy) { g->UpdateCell(cx, cy, 300); }
 
+// Found by fuzzing the RBPF node (tests/fuzz/regressions/rbpf_node/far-origin-cell-cast): a
+// pose from corrupt odometry 4e8 m away made the scan origin's cell index an out-of-range int
+// cast (undefined behaviour). A scan from beyond kMaxCellIndex cells is left out, and so is a
+// beam to there; the rest of a scan is integrated.
+TEST(TiledGrid, ScansFromOrToAbsurdPlacesAreLeftOut) {
+  TiledGrid g(Opts());
+  g.IntegrateScan({4.3e8, 0.0}, {{4.3e8 + 1.0, 0.0}}, {1});
+  g.IntegrateScan({std::nan(""), 0.0}, {{1.0, 0.0}}, {1});
+  EXPECT_EQ(g.NumTiles(), 0);
+  g.IntegrateScan({0.0, 0.0}, {{1.0, 0.0}, {0.0, -1e12}, {0.0, INFINITY}}, {1, 1, 0});
+  EXPECT_TRUE(g.IsOccupied(20, 0));  // the good beam's end
+  TiledGrid only_good(Opts());
+  only_good.IntegrateScan({0.0, 0.0}, {{1.0, 0.0}}, {1});
+  EXPECT_EQ(g.NumTiles(), only_good.NumTiles());
+}
+
 TEST(TiledGrid, DistanceFieldIsEuclideanDistanceToNearestObstacle) {
   TiledGrid g(Opts());
   MakeObstacle(&g, 10, 10);

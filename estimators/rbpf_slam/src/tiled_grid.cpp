@@ -300,6 +300,12 @@ void TiledGrid::OnBecameFree(int cx, int cy) {
 void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
                               const std::vector<Eigen::Vector2d>& endpoints_world,
                               const std::vector<uint8_t>& is_hit) {
+  // Cell indices are ints: a scan from (or a beam to) beyond kMaxCellIndex cells, or not
+  // finite, comes from a corrupt pose or range and is left out (it was an out-of-range cast).
+  const auto in_range = [&](const Eigen::Vector2d& p) {
+    return std::abs(p.x() * inv_res_) < kMaxCellIndex && std::abs(p.y() * inv_res_) < kMaxCellIndex;
+  };
+  if (!in_range(origin_world)) return;
   const int ox = static_cast<int>(std::floor(origin_world.x() * inv_res_));
   const int oy = static_cast<int>(std::floor(origin_world.y() * inv_res_));
   const int step = std::max(1, opt_.free_space_beam_step);
@@ -310,6 +316,7 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
   // Free space first for all beams, then the hits, so that a grazing ray of this scan does not
   // erase a wall cell another beam of the same scan hits.
   for (size_t k = 0; k < endpoints_world.size(); k += step) {
+    if (!in_range(endpoints_world[k])) continue;
     const int ex = static_cast<int>(std::floor(endpoints_world[k].x() * inv_res_));
     const int ey = static_cast<int>(std::floor(endpoints_world[k].y() * inv_res_));
     // Bresenham from (ox, oy) to (ex, ey), excluding the end cell of a hit.
@@ -366,7 +373,7 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     }
   }
   for (size_t k = 0; k < endpoints_world.size(); ++k) {
-    if (!is_hit[k]) continue;
+    if (!is_hit[k] || !in_range(endpoints_world[k])) continue;
     UpdateCell(static_cast<int>(std::floor(endpoints_world[k].x() * inv_res_)),
                static_cast<int>(std::floor(endpoints_world[k].y() * inv_res_)), hit_);
   }

@@ -58,6 +58,12 @@ fl::Status StereoCalibration::Validate() const {
     return fl::Status::Error("stereo calibration: image size " + std::to_string(width) + "x" +
                              std::to_string(height) + " is too small (>= 64x64)");
   }
+  // A bound for what arrives over the network (images and buffers are sized from it).
+  if (width > kMaxImageSidePx || height > kMaxImageSidePx) {
+    return fl::Status::Error("stereo calibration: image size " + std::to_string(width) + "x" +
+                             std::to_string(height) + " is larger than " +
+                             std::to_string(kMaxImageSidePx) + " px a side (corrupt message?)");
+  }
   const Eigen::Matrix3d R = T_base_camera.linear();
   if (!T_base_camera.matrix().allFinite() ||
       (R * R.transpose() - Eigen::Matrix3d::Identity()).norm() > 1e-6 || R.determinant() < 0) {

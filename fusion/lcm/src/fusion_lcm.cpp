@@ -19,6 +19,11 @@
 
 namespace fl::fusion {
 namespace {
+
+// Time stamps beyond ±2^61 us (about 73000 years) cannot come from a clock: refused at the
+// door, so that the fusion's differences of two time stamps never overflow int64.
+constexpr Utime kMaxUtime = Utime{1} << 61;
+bool PlausibleUtime(Utime t) { return t > -kMaxUtime && t < kMaxUtime; }
 std::atomic<bool> g_save_map_requested{false};
 }  // namespace
 
@@ -287,6 +292,10 @@ std::string FusionNode::Summary() const {
 
 void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   status_.CountIn();
+  if (!PlausibleUtime(m.utime)) {
+    status_.CountDropped(ch_rbpf_pose_ + ": utime " + std::to_string(m.utime) + " out of range");
+    return;
+  }
   const auto t0 = std::chrono::steady_clock::now();
   if (restored_ && !restoring_) {
     restored_ = false;
@@ -333,6 +342,10 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
 
 void FusionNode::OnFactor(const fusionloc::relative_pose_factor_t& m, const std::string& channel) {
   status_.CountIn();
+  if (!PlausibleUtime(m.utime_i) || !PlausibleUtime(m.utime_j)) {
+    status_.CountDropped(channel + ": utime_i/utime_j out of range");
+    return;
+  }
   RelativePoseFactor f;
   std::string error;
   if (!FactorFromLcm(m, &f, &error)) {
@@ -346,12 +359,20 @@ void FusionNode::OnFactor(const fusionloc::relative_pose_factor_t& m, const std:
 
 void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
   status_.CountIn();
+  if (!PlausibleUtime(m.utime)) {
+    status_.CountDropped(ch_odometry_ + ": utime " + std::to_string(m.utime) + " out of range");
+    return;
+  }
   const Status s = fusion_.AddOdometry(m.utime, Pose2(m.x, m.y, m.theta));
   if (!s.ok()) status_.CountDropped(s.message());
 }
 
 void FusionNode::OnPoints(const fusionloc::point_cloud_t& m) {
   status_.CountIn();
+  if (!PlausibleUtime(m.utime)) {
+    status_.CountDropped(ch_points_ + ": utime " + std::to_string(m.utime) + " out of range");
+    return;
+  }
   std::vector<Eigen::Vector3f> points;
   try {
     points = maps::PointsFromMessage(m);

@@ -17,6 +17,7 @@
 #include "bot_core/pose_t.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/log.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
 namespace fl::importers {
@@ -24,6 +25,16 @@ namespace {
 
 [[noreturn]] void LineError(const std::string& path, int64_t line, const std::string& what) {
   throw std::runtime_error(path + ":" + std::to_string(line) + ": " + what);
+}
+
+// A line with fewer fields than its message type needs (it stops early).
+class TruncatedLine : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+[[noreturn]] void TruncatedLineError(const std::string& path, int64_t line,
+                                     const std::string& what) {
+  throw TruncatedLine(path + ":" + std::to_string(line) + ": " + what);
 }
 
 std::vector<std::string> Tokenize(const std::string& line) {
@@ -40,12 +51,14 @@ std::vector<std::string> Tokenize(const std::string& line) {
 }
 
 // Parses a finite number that is the whole token; else a FILE:LINE error naming the field.
+// Numbers too small for a normal double (CARMEN loggers print values such as 9.53173e-312:
+// strtod gives the subnormal or 0 with ERANGE) are accepted; only inf, nan and overflow are
+// refused.
 double ParseNumber(const std::string& token, const char* field, const std::string& type,
                    const std::string& path, int64_t line) {
-  errno = 0;
   char* end = nullptr;
   const double v = std::strtod(token.c_str(), &end);
-  if (end == token.c_str() || *end != '\0' || errno == ERANGE || !std::isfinite(v)) {
+  if (end == token.c_str() || *end != '\0' || !std::isfinite(v)) {
     LineError(path, line,
               type + " field '" + field + "' is '" + token +
                   "', not a finite number (corrupt line; repair or delete it)");
@@ -107,16 +120,20 @@ class LineReader {
                                ": read error: " + (msg ? msg : "unknown") +
                                " (truncated or corrupt gzip file? re-download it)");
     }
+    last_had_newline_ = !line->empty() && line->back() == '\n';
     while (!line->empty() && (line->back() == '\n' || line->back() == '\r')) line->pop_back();
     ++line_;
     return true;
   }
   int64_t line_number() const { return line_; }
+  // The line Next() returned last ended in a newline (else the file ends in mid-line).
+  bool last_had_newline() const { return last_had_newline_; }
 
  private:
   std::string path_;
   gzFile file_ = nullptr;
   int64_t line_ = 0;
+  bool last_had_newline_ = true;
 };
 
 // Box-Muller on mt19937_64 (fully specified by the standard, unlike std::normal_distribution),
@@ -214,13 +231,13 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
   LineReader reader(path);
   std::string text;
   int64_t flaser_lines = 0, robotlaser_lines = 0;
-  while (reader.Next(&text)) {
-    const int64_t line = reader.line_number();
+  // One line; throws std::runtime_error "FILE:LINE: ..." if it is malformed.
+  const auto parse_line = [&](const std::string& text, int64_t line) {
     const std::vector<std::string> t = Tokenize(text);
-    if (t.empty() || t[0][0] == '#') continue;
+    if (t.empty() || t[0][0] == '#') return;
     const std::string& type = t[0];
     if (type == "FLASER") {
-      if (t.size() < 2) LineError(path, line, "truncated FLASER line: no beam count");
+      if (t.size() < 2) TruncatedLineError(path, line, "truncated FLASER line: no beam count");
       char* end = nullptr;
       const long n = std::strtol(t[1].c_str(), &end, 10);
       if (*end != '\0' || n <= 0 || n > 100000) {
@@ -228,7 +245,7 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
       }
       const size_t expected = static_cast<size_t>(n) + 11;
       if (t.size() < expected) {
-        LineError(path, line,
+        TruncatedLineError(path, line,
                   "truncated FLASER line: n = " + std::to_string(n) + " beams need " +
                       std::to_string(expected) +
                       " fields (FLASER n r_1..r_n x y theta odom_x "
@@ -273,7 +290,7 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
           "ipc_timestamp hostname logger_timestamp)";
       auto count_at = [&](size_t k, const char* what) -> size_t {
         if (t.size() <= k) {
-          LineError(path, line,
+          TruncatedLineError(path, line,
                     "truncated ROBOTLASER1 line: only " + std::to_string(t.size()) + " fields" +
                         kFormat + "; repair or delete the line");
         }
@@ -291,7 +308,7 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
       const size_t m = count_at(9 + n, "remission count");
       const size_t expected = n + m + 24;
       if (t.size() != expected) {
-        LineError(path, line,
+        (t.size() < expected ? TruncatedLineError : LineError)(path, line,
                   std::string(t.size() < expected ? "truncated ROBOTLASER1 line"
                                                   : "ROBOTLASER1 line too long") +
                       ": n = " + std::to_string(n) + " beams and m = " + std::to_string(m) +
@@ -327,7 +344,7 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
       log.scans.push_back(std::move(s));
     } else if (type == "ODOM") {
       if (t.size() != 10) {
-        LineError(path, line,
+        (t.size() < 10 ? TruncatedLineError : LineError)(path, line,
                   std::string(t.size() < 10 ? "truncated ODOM line" : "ODOM line too long") +
                       ": expected 10 fields (ODOM x y theta tv rv accel ipc_timestamp hostname "
                       "logger_timestamp), found " +
@@ -348,6 +365,26 @@ CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp, d
       log.odom.push_back(o);
     } else {
       ++log.skipped_types[type];
+    }
+  };
+  // A log cut short while it was written ends in a partial line: the last line, if it does
+  // not parse and is incomplete (no newline at its end, or fewer fields than its type needs),
+  // is dropped with a warning naming it; everything before it is kept. Any other bad line is
+  // an error.
+  bool have = reader.Next(&text);
+  while (have) {
+    const int64_t line = reader.line_number();
+    const bool complete = reader.last_had_newline();
+    const std::string current = std::move(text);
+    have = reader.Next(&text);
+    try {
+      parse_line(current, line);
+    } catch (const std::runtime_error& e) {
+      const bool truncated = dynamic_cast<const TruncatedLine*>(&e) != nullptr;
+      if (have || (complete && !truncated)) throw;
+      FL_LOG(WARN) << "dropped the last line (" << e.what()
+                   << "): the log ends in an incomplete line, probably cut short while written";
+      log.dropped_last_line = line;
     }
   }
   log.lines = reader.line_number();
@@ -507,6 +544,10 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
   ConvertSummary summary;
   summary.input = in;
   summary.output = out_log;
+  if (log.dropped_last_line > 0) {
+    summary.warnings.push_back("dropped the incomplete last line " + in + ":" +
+                            std::to_string(log.dropped_last_line));
+  }
   if (!options.timestamps_from.empty()) {
     const CarmenLog raw =
         ReadCarmenLog(options.timestamps_from, options.timestamp, options.fov_deg);

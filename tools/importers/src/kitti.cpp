@@ -21,6 +21,7 @@
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/log.hpp"
 #include "fusionloc/stereo_calibration_t.hpp"
 
 namespace fl::importers {
@@ -56,11 +57,20 @@ std::vector<std::string> ListPngs(const std::string& dir) {
   return out;
 }
 
-// Non-empty lines of a text file with their 1-based line numbers.
-std::vector<std::pair<int, std::string>> ReadLines(const std::string& path) {
+// A whole text file.
+std::string ReadText(const std::string& path) {
   std::ifstream in(path);
   if (!in) Fail(path + ": cannot open (missing or unreadable)");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) Fail(path + ": read error");
+  return ss.str();
+}
+
+// Non-empty lines of a text with their 1-based line numbers.
+std::vector<std::pair<int, std::string>> SplitLines(const std::string& text) {
   std::vector<std::pair<int, std::string>> out;
+  std::istringstream in(text);
   std::string line;
   int n = 0;
   while (std::getline(in, line)) {
@@ -68,8 +78,11 @@ std::vector<std::pair<int, std::string>> ReadLines(const std::string& path) {
     while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
     if (!line.empty()) out.emplace_back(n, line);
   }
-  if (in.bad()) Fail(path + ": read error");
   return out;
+}
+
+std::vector<std::pair<int, std::string>> ReadLines(const std::string& path) {
+  return SplitLines(ReadText(path));
 }
 
 // Parses exactly `count` finite numbers from `text`; else a FILE:LINE error.
@@ -94,10 +107,11 @@ std::vector<double> ParseNumbers(const std::string& text, size_t count, const st
   return v;
 }
 
-// "KEY: numbers" calibration file -> key -> (line, text after the colon).
-std::map<std::string, std::pair<int, std::string>> ReadCalibFile(const std::string& path) {
+// "KEY: numbers" calibration text -> key -> (line, text after the colon).
+std::map<std::string, std::pair<int, std::string>> ParseCalibText(const std::string& text,
+                                                                  const std::string& path) {
   std::map<std::string, std::pair<int, std::string>> out;
-  for (const auto& [n, line] : ReadLines(path)) {
+  for (const auto& [n, line] : SplitLines(text)) {
     const size_t colon = line.find(':');
     if (colon == std::string::npos) {
       Fail(path + ":" + std::to_string(n) + ": expected 'KEY: values', found '" + line + "'");
@@ -105,6 +119,10 @@ std::map<std::string, std::pair<int, std::string>> ReadCalibFile(const std::stri
     out[line.substr(0, colon)] = {n, line.substr(colon + 1)};
   }
   return out;
+}
+
+std::map<std::string, std::pair<int, std::string>> ReadCalibFile(const std::string& path) {
+  return ParseCalibText(ReadText(path), path);
 }
 
 std::vector<double> CalibValue(const std::map<std::string, std::pair<int, std::string>>& calib,
@@ -184,22 +202,6 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& m, const std::string& wha
     Fail(what + ": the 3x3 part is not a rotation (R^T R != I or det < 0)");
   }
   return fl::NearestRotation(m);
-}
-
-std::vector<Eigen::Isometry3d> ReadPoses(const std::string& path) {
-  std::vector<Eigen::Isometry3d> out;
-  for (const auto& [n, line] : ReadLines(path)) {
-    const std::vector<double> v = ParseNumbers(line, 12, path, n, "pose (3x4 row-major)");
-    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) t.linear()(r, c) = v[static_cast<size_t>(4 * r + c)];
-      t.translation()(r) = v[static_cast<size_t>(4 * r + 3)];
-    }
-    t.linear() = NearestRotation(t.linear(), path + ":" + std::to_string(n));
-    out.push_back(t);
-  }
-  if (out.empty()) Fail(path + ": pose file is empty");
-  return out;
 }
 
 // "R: 9 numbers" + "T: 3 numbers" calibration file -> T_to_from.
@@ -390,6 +392,77 @@ std::vector<Eigen::Isometry3d> PosesFromOxts(const std::string& folder) {
   return out;
 }
 
+KittiCalibration ParseKittiCalibration(const std::string& text, const std::string& name,
+                                       bool raw_layout, bool color) {
+  const auto calib = ParseCalibText(text, name);
+  if (raw_layout) {
+    const auto s0 = CalibValue(calib, name, "S_rect_00", 2);
+    const auto s1 = CalibValue(calib, name, "S_rect_01", 2);
+    if (s0 != s1) {
+      Fail(name + ": inconsistent stereo calibration: S_rect_00 (" + std::to_string(s0[0]) + "x" +
+           std::to_string(s0[1]) + ") and S_rect_01 (" + std::to_string(s1[0]) + "x" +
+           std::to_string(s1[1]) + ") differ; rectified images share one size");
+    }
+    if (!(s0[0] >= 1 && s0[0] <= 100000 && s0[1] >= 1 && s0[1] <= 100000) ||
+        s0[0] != std::floor(s0[0]) || s0[1] != std::floor(s0[1])) {
+      Fail(name + ": S_rect_00 is not a positive integer image size (at most 100000 px)");
+    }
+    const Projection l =
+        DecomposeProjection(CalibValue(calib, name, "P_rect_00", 12), name, "P_rect_00");
+    const Projection r =
+        DecomposeProjection(CalibValue(calib, name, "P_rect_01", 12), name, "P_rect_01");
+    KittiCalibration c = CheckStereo(l, r, name, "P_rect_00", "P_rect_01");
+    c.width = static_cast<int>(s0[0]);
+    c.height = static_cast<int>(s0[1]);
+    return c;
+  }
+  const std::string lk = color ? "P2" : "P0", rk = color ? "P3" : "P1";
+  const Projection l = DecomposeProjection(CalibValue(calib, name, lk, 12), name, lk);
+  const Projection r = DecomposeProjection(CalibValue(calib, name, rk, 12), name, rk);
+  return CheckStereo(l, r, name, lk, rk);
+}
+
+std::vector<Utime> ParseKittiTimes(const std::string& text, const std::string& name) {
+  std::vector<Utime> out;
+  for (const auto& [n, line] : SplitLines(text)) {
+    const double s = ParseNumbers(line, 1, name, n, "time [s]")[0];
+    if (s < 0 || s > 1e9) {
+      Fail(name + ":" + std::to_string(n) + ": time " + line + " s is not in [0, 1e9]");
+    }
+    out.push_back(kKittiOdometryEpochUtime + SecondsToUtime(s));
+  }
+  return out;
+}
+
+std::vector<Utime> ParseKittiTimestamps(const std::string& text, const std::string& name) {
+  std::vector<Utime> out;
+  for (const auto& [n, line] : SplitLines(text)) {
+    Utime t = 0;
+    if (!ParseKittiTimestamp(line, &t)) {
+      Fail(name + ":" + std::to_string(n) + ": '" + line.substr(0, 80) +
+           "' is not a time stamp 'YYYY-MM-DD HH:MM:SS.fraction'");
+    }
+    out.push_back(t);
+  }
+  return out;
+}
+
+std::vector<Eigen::Isometry3d> ParseKittiPoses(const std::string& text, const std::string& name) {
+  std::vector<Eigen::Isometry3d> out;
+  for (const auto& [n, line] : SplitLines(text)) {
+    const std::vector<double> v = ParseNumbers(line, 12, name, n, "pose (3x4 row-major)");
+    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) t.linear()(r, c) = v[static_cast<size_t>(4 * r + c)];
+      t.translation()(r) = v[static_cast<size_t>(4 * r + 3)];
+    }
+    t.linear() = NearestRotation(t.linear(), name + ":" + std::to_string(n));
+    out.push_back(t);
+  }
+  if (out.empty()) Fail(name + ": pose file is empty");
+  return out;
+}
+
 KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& folder) {
   const Status valid = options.Validate();
   if (!valid.ok()) throw std::invalid_argument("KITTI options: " + valid.message());
@@ -413,24 +486,9 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     right_dir = Join(folder, "image_01/data");
     const std::string cpath = Join(folder, "calib_cam_to_cam.txt");
     if (!IsFile(cpath)) Fail(cpath + ": missing (the raw drive's calibration is needed)");
-    const auto calib = ReadCalibFile(cpath);
-    const auto s0 = CalibValue(calib, cpath, "S_rect_00", 2);
-    const auto s1 = CalibValue(calib, cpath, "S_rect_01", 2);
-    if (s0 != s1) {
-      Fail(cpath + ": inconsistent stereo calibration: S_rect_00 (" + std::to_string(s0[0]) + "x" +
-           std::to_string(s0[1]) + ") and S_rect_01 (" + std::to_string(s1[0]) + "x" +
-           std::to_string(s1[1]) + ") differ; rectified images share one size");
-    }
-    width = static_cast<int>(s0[0]);
-    height = static_cast<int>(s0[1]);
-    if (width <= 0 || height <= 0 || width != s0[0] || height != s0[1]) {
-      Fail(cpath + ": S_rect_00 is not a positive integer image size");
-    }
-    const Projection l =
-        DecomposeProjection(CalibValue(calib, cpath, "P_rect_00", 12), cpath, "P_rect_00");
-    const Projection r =
-        DecomposeProjection(CalibValue(calib, cpath, "P_rect_01", 12), cpath, "P_rect_01");
-    seq.calibration = CheckStereo(l, r, cpath, "P_rect_00", "P_rect_01");
+    seq.calibration = ParseKittiCalibration(ReadText(cpath), cpath, true, false);
+    width = seq.calibration.width;
+    height = seq.calibration.height;
   } else {
     bool color = options.cameras == "color" || (options.cameras == "auto" && !odo_gray);
     if (options.cameras == "gray" && !odo_gray)
@@ -441,11 +499,7 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     const std::string cpath = Join(folder, "calib.txt");
     if (!IsFile(cpath))
       Fail(cpath + ": missing (the sequence's calibration with P0..P3 is needed)");
-    const auto calib = ReadCalibFile(cpath);
-    const std::string lk = color ? "P2" : "P0", rk = color ? "P3" : "P1";
-    const Projection l = DecomposeProjection(CalibValue(calib, cpath, lk, 12), cpath, lk);
-    const Projection r = DecomposeProjection(CalibValue(calib, cpath, rk, 12), cpath, rk);
-    seq.calibration = CheckStereo(l, r, cpath, lk, rk);
+    seq.calibration = ParseKittiCalibration(ReadText(cpath), cpath, false, color);
   }
   seq.left_images = ListPngs(left_dir);
   seq.right_images = ListPngs(right_dir);
@@ -454,39 +508,36 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
   CheckPairs(seq.left_images, seq.right_images, left_dir, right_dir);
   const size_t frames = seq.left_images.size();
 
-  // Time stamps.
-  if (raw) {
-    const std::string tpath = Join(folder, "image_00/timestamps.txt");
-    const auto lines = ReadLines(tpath);
-    if (lines.size() != frames) {
-      Fail(tpath + ": " + std::to_string(lines.size()) + " time stamps for " +
+  // Time stamps: one per image; a longer file (images trimmed, times.txt not) gives its
+  // first `frames` entries, with a warning.
+  const auto use_first = [&](std::vector<Utime> all, const std::string& path) {
+    if (all.size() < frames) {
+      Fail(path + ": " + std::to_string(all.size()) + " time stamps for " +
            std::to_string(frames) + " images in " + left_dir + " (one line per image needed)");
     }
-    for (const auto& [n, text] : lines) {
-      Utime t = 0;
-      if (!ParseKittiTimestamp(text, &t)) {
-        Fail(tpath + ":" + std::to_string(n) + ": '" + text +
-             "' is not a time stamp 'YYYY-MM-DD HH:MM:SS.fraction'");
-      }
-      seq.utimes.push_back(t);
+    if (all.size() > frames) {
+      seq.warnings.push_back(path + ": " + std::to_string(all.size()) + " time stamps for " +
+                             std::to_string(frames) + " images in " + left_dir +
+                             "; using the first " + std::to_string(frames));
+      FL_LOG(WARN) << seq.warnings.back();
+      all.resize(frames);
     }
+    return all;
+  };
+  if (raw) {
+    const std::string tpath = Join(folder, "image_00/timestamps.txt");
+    seq.utimes = use_first(ParseKittiTimestamps(ReadText(tpath), tpath), tpath);
     const std::string rpath = Join(folder, "image_01/timestamps.txt");
-    if (IsFile(rpath) && ReadLines(rpath).size() != seq.right_images.size()) {
-      Fail(rpath + ": " + std::to_string(ReadLines(rpath).size()) + " time stamps for " +
-           std::to_string(seq.right_images.size()) + " images in " + right_dir);
+    if (IsFile(rpath)) {
+      const size_t n = ParseKittiTimestamps(ReadText(rpath), rpath).size();
+      if (n < seq.right_images.size()) {
+        Fail(rpath + ": " + std::to_string(n) + " time stamps for " +
+             std::to_string(seq.right_images.size()) + " images in " + right_dir);
+      }
     }
   } else {
     const std::string tpath = Join(folder, "times.txt");
-    const auto lines = ReadLines(tpath);
-    if (lines.size() != frames) {
-      Fail(tpath + ": " + std::to_string(lines.size()) + " times for " + std::to_string(frames) +
-           " images in " + left_dir + " (one line per image needed)");
-    }
-    for (const auto& [n, text] : lines) {
-      const double s = ParseNumbers(text, 1, tpath, n, "time [s]")[0];
-      if (s < 0) Fail(tpath + ":" + std::to_string(n) + ": negative time " + text);
-      seq.utimes.push_back(kKittiOdometryEpochUtime + SecondsToUtime(s));
-    }
+    seq.utimes = use_first(ParseKittiTimes(ReadText(tpath), tpath), tpath);
     // The size comes from the first left image (calib.txt has none); every image is checked.
     const cv::Mat first = cv::imread(seq.left_images[0], cv::IMREAD_UNCHANGED);
     if (first.empty())
@@ -504,7 +555,14 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
   }
   if (!ppath.empty()) {
     if (!IsFile(ppath)) Fail(ppath + ": pose file missing (check --poses)");
-    seq.T_cam0start_cam0 = ReadPoses(ppath);
+    seq.T_cam0start_cam0 = ParseKittiPoses(ReadText(ppath), ppath);
+    if (seq.T_cam0start_cam0.size() > frames) {
+      seq.warnings.push_back(ppath + ": " + std::to_string(seq.T_cam0start_cam0.size()) +
+                             " poses for " + std::to_string(frames) + " frames in " + folder +
+                             "; using the first " + std::to_string(frames));
+      FL_LOG(WARN) << seq.warnings.back();
+      seq.T_cam0start_cam0.resize(frames);
+    }
     if (seq.T_cam0start_cam0.size() != frames) {
       Fail(ppath + ": " + std::to_string(seq.T_cam0start_cam0.size()) + " poses for " +
            std::to_string(frames) + " frames in " + folder +
@@ -542,6 +600,7 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
   ConvertSummary summary;
   summary.input = folder;
   summary.output = out_log;
+  summary.warnings = seq.warnings;
   const KittiCalibration& c = seq.calibration;
   const Eigen::Matrix3d R_bc = RotationBaseCamera();
 

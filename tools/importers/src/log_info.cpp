@@ -72,8 +72,8 @@ const LcmTypeInfo* FindLcmType(int64_t fingerprint) {
 }
 
 double ChannelInfo::rate_hz() const {
-  const Utime span = last_utime - first_utime;
-  return (count > 1 && span > 0) ? (count - 1) / UtimeToSeconds(span) : 0.0;
+  const double span = SecondsBetween(first_utime, last_utime);
+  return (count > 1 && span > 0) ? (count - 1) / span : 0.0;
 }
 
 bool LogInfo::has_problems() const {
@@ -160,7 +160,7 @@ std::string LogInfo::ToText() const {
   if (events == 0) ss << "no events\n";
   if (events > 0) {
     ss << "time: " << TimeText(first_utime) << " .. " << TimeText(last_utime) << " (span "
-       << std::fixed << std::setprecision(3) << UtimeToSeconds(last_utime - first_utime) << " s)\n";
+       << std::fixed << std::setprecision(3) << SecondsBetween(first_utime, last_utime) << " s)\n";
   }
   size_t wc = 7, wt = 4;
   for (const auto& c : channels) {
@@ -179,8 +179,8 @@ std::string LogInfo::ToText() const {
        << std::setw(static_cast<int>(wt)) << c.type << std::right << std::setw(9) << c.count
        << std::setw(10) << std::fixed << std::setprecision(2) << c.rate_hz() << std::setw(12)
        << Bytes(c.bytes) << std::setw(11) << std::setprecision(3)
-       << UtimeToSeconds(c.first_utime - first_utime) << std::setw(11)
-       << UtimeToSeconds(c.last_utime - first_utime) << std::setw(9) << c.decode_errors
+       << SecondsBetween(first_utime, c.first_utime) << std::setw(11)
+       << SecondsBetween(first_utime, c.last_utime) << std::setw(9) << c.decode_errors
        << std::setw(9) << c.time_backwards << "\n";
   }
   bool any = false;
@@ -221,7 +221,7 @@ std::string LogInfo::ToJson() const {
   ss << "{\"path\": " << JsonString(path) << ", \"file_bytes\": " << file_bytes
      << ", \"events\": " << events << ", \"first_utime\": " << first_utime
      << ", \"last_utime\": " << last_utime
-     << ", \"span_s\": " << UtimeToSeconds(last_utime - first_utime)
+     << ", \"span_s\": " << SecondsBetween(first_utime, last_utime)
      << ", \"time_backwards\": " << time_backwards
      << ", \"corrupt_bytes_skipped\": " << corrupt_bytes_skipped
      << ", \"truncated\": " << (truncated ? "true" : "false")

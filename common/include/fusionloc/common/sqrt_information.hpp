@@ -22,8 +22,12 @@ enum class SqrtConvention {
 };
 
 // S with SᵀS = Ω (kExact). Returns false, leaving *sqrt_information unchanged, if Ω is not
-// finite, is zero, is not symmetric to 1e-9 of its largest entry, or is not positive definite
-// (a Cholesky pivot at or below 1e-12 √max|Ω| counts as singular).
+// finite, is zero, is not symmetric to 1e-9 of its largest entry, or is not positive definite.
+// Numerically singular counts as not positive definite: a Cholesky pivot L_ii² at or below
+// 1e-12 Ω_ii (the row lost 12 digits to the rows before it: they are nearly dependent). The
+// test is relative to each row's own diagonal, so it does not change when the axes are scaled
+// (Ω -> DΩD): information whose entries span many orders of magnitude (1e12 next to 1e-6, as
+// some published pose graphs have) is accepted when it is positive definite.
 template <int N>
 bool SqrtInformation(const Eigen::Matrix<double, N, N>& information,
                      Eigen::Matrix<double, N, N>* sqrt_information,
@@ -35,7 +39,11 @@ bool SqrtInformation(const Eigen::Matrix<double, N, N>& information,
   Eigen::LLT<Eigen::Matrix<double, N, N>> llt(information);
   if (llt.info() != Eigen::Success) return false;
   const Eigen::Matrix<double, N, N> l = llt.matrixL();
-  if (l.diagonal().minCoeff() <= 1e-12 * std::sqrt(scale)) return false;
+  for (int i = 0; i < N; ++i) {
+    if (!(information(i, i) > 0.0) || !(l(i, i) * l(i, i) > 1e-12 * information(i, i))) {
+      return false;
+    }
+  }
   *sqrt_information = convention == SqrtConvention::kExact ? l.transpose() : l;
   return true;
 }

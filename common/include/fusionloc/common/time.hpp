@@ -13,8 +13,19 @@ using Utime = int64_t;  // [us]
 constexpr Utime kUtimePerSecond = 1000000;
 
 inline double UtimeToSeconds(Utime t) { return static_cast<double>(t) * 1e-6; }
+// Rounded to the microsecond. Saturates at the int64 range (about ±292000 years) and maps NaN
+// to 0, so that a nonsense time read from a file is a nonsense value, never undefined
+// behaviour (the cast of an out-of-range double).
 inline Utime SecondsToUtime(double s) {
-  return static_cast<Utime>(s * 1e6 + (s >= 0 ? 0.5 : -0.5));
+  const double us = s * 1e6 + (s >= 0 ? 0.5 : -0.5);
+  if (!(us == us)) return 0;
+  if (us >= 9.2233720368547748e18) return INT64_MAX;
+  if (us <= -9.2233720368547758e18) return INT64_MIN;
+  return static_cast<Utime>(us);
+}
+// b - a in seconds, without the int64 overflow of subtracting far-apart utimes.
+inline double SecondsBetween(Utime a, Utime b) {
+  return (static_cast<double>(b) - static_cast<double>(a)) * 1e-6;
 }
 
 // Wall-clock time now.

@@ -14,6 +14,14 @@
 namespace fl::rbpf {
 
 // ---- conversions ----
+namespace {
+constexpr double kMaxOdometryM = 1e6;     // [m] 1000 km from the odometry origin
+constexpr double kMaxMountOffsetM = 100;  // [m] a sensor mounted on the robot
+bool PlausiblePose(const Pose2& p, double max_xy) {
+  return std::abs(p.x) <= max_xy && std::abs(p.y) <= max_xy && std::isfinite(p.theta);
+}
+}  // namespace
+
 LaserScan ScanFromLcm(const bot_core::planar_lidar_t& m) {
   LaserScan s;
   s.utime = m.utime;
@@ -207,13 +215,26 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
       status_(lcm, kProgram) {
   lcm_->Subscribe<bot_core::rigid_transform_t>(
       ch_laser_to_base_, [this](const bot_core::rigid_transform_t& m, const std::string&) {
-        OnLaserToBase(Pose2::FromIsometry3(TransformFromLcm(m)));
+        const Pose2 T = Pose2::FromIsometry3(TransformFromLcm(m));
+        if (!PlausiblePose(T, kMaxMountOffsetM)) {
+          status_.CountDropped(ch_laser_to_base_ + ": T_base_laser not finite or more than " +
+                               std::to_string(kMaxMountOffsetM) + " m away; ignored");
+          return;
+        }
+        OnLaserToBase(T);
       });
   lcm_->Subscribe<bot_core::planar_lidar_t>(
       ch_laser_, [this](const bot_core::planar_lidar_t& m, const std::string&) { OnLaser(m); });
   if (!node_options_.no_odometry) {
     lcm_->Subscribe<fusionloc::wheel_odometry_t>(
         ch_odometry_, [this](const fusionloc::wheel_odometry_t& m, const std::string&) {
+          // Odometry further than kMaxOdometryM from its origin is corrupt: poses that far
+          // have no grid cell (the map's cell indices are ints).
+          if (!PlausiblePose(Pose2(m.x, m.y, m.theta), kMaxOdometryM)) {
+            status_.CountDropped(ch_odometry_ + ": x, y, theta not finite or beyond " +
+                                 std::to_string(kMaxOdometryM) + " m; dropped");
+            return;
+          }
           const Status st = sync_.PushOdometry(m.utime, Pose2(m.x, m.y, m.theta));
           if (!st.ok()) warn_.Warn(st.message());
         });

@@ -8,9 +8,15 @@
 //
 // The edge measurement is T_i_j, the pose of vertex j in the frame of vertex i. Angles are
 // wrapped to [-pi, pi) and quaternions normalised on reading (as Ceres' examples do).
+// A file of edges only, without any VERTEX line (several public benchmark collections ship
+// graphs so), is accepted: the initial poses are composed from the edges, along the odometry
+// chain (edges between consecutive ids) first and then a spanning tree of the other edges,
+// with the smallest id (of each unconnected part) at the origin; a log line says so
+// (G2oGraph::initialised_from_edges). Information matrices are kept as written: any
+// symmetric positive-definite one is accepted, whatever the spread of its entries.
 // Blank lines and lines starting with '#' are skipped. Anything else (an unknown tag, a
 // missing or non-numeric field, a non-finite number, a zero quaternion, an edge to an unknown
-// vertex, a duplicate vertex id, a file mixing 2D and 3D) is an error naming file:line.
+// vertex, an edge from a vertex to itself, a duplicate vertex id, a file mixing 2D and 3D) is an error naming file:line.
 #pragma once
 
 #include <Eigen/Core>
@@ -51,6 +57,8 @@ struct G2oGraph {
   std::map<int, G2oPose3, std::less<int>, Eigen::aligned_allocator<std::pair<const int, G2oPose3>>>
       poses3;  // id -> T_world_i
   std::vector<G2oEdge3, Eigen::aligned_allocator<G2oEdge3>> edges3;
+
+  bool initialised_from_edges = false;  // the file had no VERTEX line (see above)
 
   bool is_3d() const { return !poses3.empty(); }
   size_t num_poses() const { return poses2.size() + poses3.size(); }

@@ -33,6 +33,9 @@ struct PointMapOptions {
   Status Validate() const;
 };
 
+// [m] the largest |x| or |y| of a keyframe pose that Build() places (1000 km).
+constexpr double kMaxMapExtentM = 1e6;
+
 class PointMap {
  public:
   explicit PointMap(const PointMapOptions& options);
@@ -44,8 +47,9 @@ class PointMap {
   // dropped (counted in dropped_points()). Error if the keyframe time is already stored.
   Status AddKeyframe(Utime utime, const std::vector<Eigen::Vector3f>& points_base);
 
-  // Places every keyframe with pose_at(utime) (false: the keyframe is skipped, counted in
-  // *skipped) and voxel-filters the result (map frame).
+  // Places every keyframe with pose_at(utime) (false, or a pose that is not finite or beyond
+  // kMaxMapExtentM: the keyframe is skipped, counted in *skipped) and voxel-filters the result
+  // (map frame).
   std::vector<Eigen::Vector3f> Build(const std::function<bool(Utime, Pose2*)>& pose_at,
                                      int* skipped = nullptr) const;
 

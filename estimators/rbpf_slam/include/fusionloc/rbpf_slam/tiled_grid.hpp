@@ -53,6 +53,8 @@ class TiledGrid {
   double resolution() const { return res_; }
   // Field radius in cells and the saturated stored distance value.
   int field_radius_cells() const { return radius_; }
+  // [cells] the largest |x| or |y| cell index IntegrateScan touches (2^24: 840 km at 5 cm).
+  static constexpr double kMaxCellIndex = 16777216.0;
 
   // Integrates one scan: `origin_world` is the laser position, `endpoints_world` the beam
   // ends, `is_hit[k]` false for beams only clearing free space (longer than max range).

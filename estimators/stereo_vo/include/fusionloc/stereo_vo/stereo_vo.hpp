@@ -30,6 +30,9 @@ struct StereoFrame;  // stereo_vo_stages.hpp
 struct Refinement;
 }  // namespace stages
 
+// Largest image side a calibration may have (Validate; a bound on what the network sends).
+constexpr int kMaxImageSidePx = 16384;
+
 // Calibration of a rectified stereo rig (the library's own plain struct).
 struct StereoCalibration {
   double fx = 0, fy = 0;      // [px] focal lengths (both cameras, rectified)

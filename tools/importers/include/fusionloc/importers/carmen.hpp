@@ -150,6 +150,7 @@ struct CarmenLog {
   std::vector<Entry> order;
   std::map<std::string, int64_t> skipped_types;  // message type -> lines skipped
   int64_t lines = 0;                             // lines read (including comments)
+  int64_t dropped_last_line = 0;  // the last line's number if it was incomplete and dropped
 };
 
 // CARMEN's beam spacing for an n-beam FLASER covering fov (radians): 0.5 deg for 361/360
@@ -159,7 +160,11 @@ double CarmenBeamStep(int n, double fov_rad);
 
 // Reads a CARMEN log (.gz is decompressed). `timestamp` is "ipc" or "logger". Throws
 // std::runtime_error "FILE:LINE: what is wrong (fix)" on a malformed FLASER or ODOM line, a
-// missing or unreadable file, or a log without any FLASER line.
+// missing or unreadable file, or a log without any FLASER line. Lines of every other type
+// are skipped and counted, never an error. The last line alone, if incomplete (no newline at
+// its end, or fewer fields than its type needs: a log cut short while written), is dropped
+// with a warning naming FILE:LINE (dropped_last_line). Numbers
+// may be subnormal (9.53173e-312); inf and nan are errors.
 CarmenLog ReadCarmenLog(const std::string& path, const std::string& timestamp = "ipc",
                         double fov_deg = 180.0);
 

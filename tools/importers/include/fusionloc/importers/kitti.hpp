@@ -86,6 +86,7 @@ struct KittiSequence {
   KittiCalibration calibration;
   std::string poses_path;                           // pose file or oxts folder used; "" if none
   std::vector<Eigen::Isometry3d> T_cam0start_cam0;  // per frame, empty if no poses
+  std::vector<std::string> warnings;  // e.g. a times.txt longer than the images (first N used)
 };
 
 // Scans and validates a folder (layout, image lists, time stamps, calibration, poses).
@@ -104,6 +105,22 @@ std::vector<Eigen::Isometry3d> PosesFromOxts(const std::string& folder);
 // Parses "YYYY-MM-DD HH:MM:SS.fffffffff" (UTC) to microseconds since the epoch (rounded).
 // Returns false if the text is not in that form.
 bool ParseKittiTimestamp(const std::string& text, Utime* utime);
+
+// The text parsers ScanKittiFolder uses on a folder's files (`name` stands for the file in
+// errors; each throws std::runtime_error "NAME:LINE: what is wrong"):
+//   calibration: raw_layout, calib_cam_to_cam.txt (S_rect_00/01 give width and height,
+//     P_rect_00/01 the pair); else calib.txt (P0/P1, or P2/P3 with color; width and height
+//     stay 0: the images give them).
+//   times: times.txt, seconds from the start (utime = kKittiOdometryEpochUtime + seconds).
+//   timestamps: a raw drive's timestamps.txt (ParseKittiTimestamp lines).
+//   poses: 12 numbers a line (row-major 3x4), the 3x3 part a rotation to 1e-3.
+// A time or pose list longer than the images present is cut to the first N with a warning
+// (images trimmed, the lists not); a shorter one is an error.
+KittiCalibration ParseKittiCalibration(const std::string& text, const std::string& name,
+                                       bool raw_layout, bool color);
+std::vector<Utime> ParseKittiTimes(const std::string& text, const std::string& name);
+std::vector<Utime> ParseKittiTimestamps(const std::string& text, const std::string& name);
+std::vector<Eigen::Isometry3d> ParseKittiPoses(const std::string& text, const std::string& name);
 
 // Converts a folder to the LCM log `out_log` (written to out_log.partial and renamed when
 // complete; on any error nothing is left at out_log and the exception is rethrown).
