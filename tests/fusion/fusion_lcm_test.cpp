@@ -107,7 +107,7 @@ struct LiveFusion {
   std::unique_ptr<LcmInterface> lcm;
   std::vector<fusionloc::fused_pose_t> fused;
   std::unique_ptr<FusionNode> node;
-}
+};
 
 double Distance(const fusionloc::fused_pose_t& m, const Pose2& T) {
   return std::hypot(m.x - T.x, m.y - T.y);
