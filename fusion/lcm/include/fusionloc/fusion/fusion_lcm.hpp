@@ -45,7 +45,7 @@ struct FusionNodeOptions {
   // journal_max_age_s replays it through the same handlers without publishing, solves the
   // whole graph once, and goes on with the graph, the map frame and the 3D map it had. A
   // journal that is older, unreadable, or whose data time lies ahead of the live data (another
-  // run) is set aside and a new graph is started. About 0.5 MB per minute with stereo at 2 Hz.
+  // run) is set aside and a new graph is started. About 0.6 MB per minute with stereo at 2 Hz.
   // "" = none.
   std::string journal;
   double journal_max_age_s = 30.0;  // [s] wall-clock age of a usable journal
