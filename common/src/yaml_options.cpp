@@ -53,6 +53,11 @@ void YamlReadArchive::TypeError(const YAML::Node& n, const std::string& key,
 
 void YamlReadArchive::CheckNoUnknownKeys() const {
   for (const auto& kv : node_) {
+    if (!kv.first.IsScalar()) {
+      throw ConfigError(Where(kv.first) + "a key " +
+                        (prefix_.empty() ? std::string() : "of '" + prefix_ + "' ") +
+                        "is a list or a map; option keys are plain names");
+    }
     const std::string key = kv.first.as<std::string>();
     if (std::find(known_.begin(), known_.end(), key) != known_.end()) continue;
     std::string msg = Where(kv.first) + "unknown key '" + Qualified(key) + "'";

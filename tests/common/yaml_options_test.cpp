@@ -77,6 +77,13 @@ TEST(YamlOptions, UnknownKeyNamesFileLineKeyAndSuggestion) {
   EXPECT_NE(e.find("did you mean 'particles'"), std::string::npos) << e;
 }
 
+// Found by fuzzing (tests/fuzz/regressions/yaml_options/non-scalar-key): a key that is itself
+// a list or a map escaped as a yaml-cpp conversion exception instead of a ConfigError.
+TEST(YamlOptions, AKeyThatIsAListOrAMapIsAConfigError) {
+  EXPECT_NE(ErrorOf("[a, b]: 1\n").find("demo.yaml:1"), std::string::npos);
+  EXPECT_NE(ErrorOf("? {x: 1}\n: 2\n").find("option keys are plain names"), std::string::npos);
+}
+
 TEST(YamlOptions, UnknownNestedKeyIsQualified) {
   const std::string e = ErrorOf("matcher:\n  max_rnge: 3\n");
   EXPECT_NE(e.find("unknown key 'matcher.max_rnge'"), std::string::npos) << e;
