@@ -47,11 +47,7 @@ int main(int argc, char** argv) {
     if (insecure && !key_path.empty()) throw fl::UsageError("--key and --insecure exclude each other");
     std::string path = key_path;
     if (path.empty() && !insecure) {
-      try {
-        path = fl::procman::DefaultKeyPath();
-      } catch (const fl::procman::KeyError&) {
-      }
-      if (!path.empty() && access(path.c_str(), F_OK) != 0) path.clear();
+      path = fl::procman::ExistingDefaultKeyPath();
     }
     std::unique_ptr<fl::procman::Key> key;
     if (!path.empty()) {

@@ -141,17 +141,15 @@ int main(int argc, char** argv) {
     if (!observer && !deputy_cli.insecure()) {
       std::string path = deputy_cli.key_path();
       if (path.empty()) {
-        try {
-          path = fl::procman::DefaultKeyPath();
-        } catch (const fl::procman::KeyError&) {
-        }
-        if (!path.empty() && access(path.c_str(), F_OK) != 0) path.clear();
+        path = fl::procman::ExistingDefaultKeyPath();
       }
       if (!path.empty()) {
         try {
           char host[256] = {0};
           gethostname(host, sizeof(host) - 1);
-          signer = std::make_unique<fl::procman::OrderSigner>(fl::procman::LoadKey(path),
+          fl::procman::Key key = fl::procman::LoadKey(path);
+          node.RequireSignedCtl({key});
+          signer = std::make_unique<fl::procman::OrderSigner>(std::move(key),
                                                               sheriff_options.name + "@" + host);
         } catch (const fl::procman::KeyError& e) {
           throw fl::UsageError(e.what());
@@ -159,7 +157,6 @@ int main(int argc, char** argv) {
         std::cout << "orders signed with key " << signer->key_id() << " (" << path << ") on "
                   << process.channels()(fl::channels::kPmdOrdersSigned)
                   << "; fl-procman-ctl orders only when signed with it (--key)\n";
-        node.RequireSignedCtl({fl::procman::LoadKey(path)});
         const std::string signed_channel = process.channels()(fl::channels::kPmdOrdersSigned);
         node.set_orders_sink([&, signed_channel](const bot_procman::orders2_t& o) {
           std::vector<uint8_t> bytes(static_cast<size_t>(o.getEncodedSize()));

@@ -328,6 +328,16 @@ void WriteNewKey(const std::string& path) {
   if (close(to_close) != 0) throw fail("close", errno);
 }
 
+std::string ExistingDefaultKeyPath() {
+  std::string path;
+  try {
+    path = DefaultKeyPath();
+  } catch (const KeyError&) {
+    return "";
+  }
+  return access(path.c_str(), F_OK) == 0 ? path : "";
+}
+
 std::string DefaultKeyPath() {
   const char* env = std::getenv("FUSIONLOC_PROCMAN_KEY");
   if (env != nullptr && env[0] != '\0') return env;

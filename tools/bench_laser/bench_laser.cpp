@@ -389,6 +389,7 @@ int main(int argc, char** argv) {
     std::vector<fl::bench::Run> seed_runs;
     std::vector<fl::eval::Trajectory> seed_trajectories;  // for the run-to-run spread
     fl::eval::Trajectory reference;                       // the same for every seed
+    std::vector<fl::eval::Relation> relations;            // read at the first seed
     for (const uint64_t seed : seeds) {
       const std::string run_name =
           seeds.size() > 1 ? in.name + "/s" + std::to_string(seed) : in.name;
@@ -532,7 +533,7 @@ int main(int argc, char** argv) {
         if (!in.relations.empty()) {
           // Kuemmerle et al. 2009: the final trajectory (a pose for every scan) and the online
           // pose against the log's hand-checked relations.
-          const std::vector<fl::eval::Relation> relations = fl::eval::ReadRelations(in.relations);
+          if (relations.empty()) relations = fl::eval::ReadRelations(in.relations);
           const fl::eval::RelationResult fr =
               fl::eval::ComputeRelationError(est, relations, max_dt);
           const fl::eval::RelationResult onr =

@@ -5,14 +5,11 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/log.hpp"
-#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/maps/map_export.hpp"
 #include "fusionloc/status_t.hpp"

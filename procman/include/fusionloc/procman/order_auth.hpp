@@ -76,6 +76,9 @@ void WriteNewKey(const std::string& path);
 //      $HOME is unset).
 // Throws KeyError only when no home folder can be found for rule 3.
 std::string DefaultKeyPath();
+// The default key file if it exists, else "" (a sheriff or fl-procman-ctl without --key signs
+// only when there is one).
+std::string ExistingDefaultKeyPath();
 
 // Signs orders for one sheriff. The counter is max(last + 1, now_us): strictly increasing,
 // and after a restart it starts from the clock again, above anything issued before (as long
