@@ -410,13 +410,82 @@ TEST(CarmenTest, TimeGoingBackwardsIsKeptAndCounted) {
   text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 9.5);
   text += fl::test::CarmenFlaser(5, 1.0, 0, 0, 0, 9.5);
   fl::test::WriteText(dir.file("t.log"), text);
-  const ConvertSummary s = ConvertCarmen(CarmenOptions{}, dir.file("t.log"), dir.file("o.lcmlog"));
+  CarmenOptions keep;
+  keep.repeated_stamps = "keep";
+  const ConvertSummary s = ConvertCarmen(keep, dir.file("t.log"), dir.file("o.lcmlog"));
   ASSERT_EQ(s.warnings.size(), 2u);
   EXPECT_NE(s.warnings[0].find("1 scans have a time stamp earlier"), std::string::npos);
   EXPECT_NE(s.warnings[1].find("1 scans share the time stamp"), std::string::npos);
   const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
   const std::vector<Utime> expected = {10000000, 9500000, 9500000};
   EXPECT_EQ(log.utimes.at(channels::kLaser), expected);
+}
+
+// A corrected log printed with 6 significant digits (csail-corrected.log.gz's shape: its 406
+// scans share 2 stamps 10^4 s apart) is stamped by order, so that the scans, their synthetic
+// odometry and the ground truth pair up one to one.
+TEST(CarmenTest, RepeatedStampsOfACorrectedLogAreStampedByOrder) {
+  TempDir dir;
+  std::string text;
+  for (int k = 0; k < 8; ++k) {
+    text += fl::test::CarmenFlaser(181, 2.0 + 0.01 * k, 0.5 * k, 0, 0.1 * k,
+                                   k < 6 ? 1.13486e9 : 1.13487e9);
+  }
+  fl::test::WriteText(dir.file("s-corrected.log"), text);
+  const ConvertSummary s =
+      ConvertCarmen(CarmenOptions{}, dir.file("s-corrected.log"), dir.file("o.lcmlog"));
+  ASSERT_FALSE(s.warnings.empty());
+  EXPECT_NE(s.warnings[0].find("6 of 8 scans repeat the time stamp"), std::string::npos)
+      << s.warnings[0];
+  EXPECT_NE(s.warnings[0].find("stamped by its order instead, 1.0 s apart"), std::string::npos);
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  const std::vector<Utime>& laser = log.utimes.at(channels::kLaser);
+  ASSERT_EQ(laser.size(), 8u);
+  for (size_t k = 0; k < laser.size(); ++k) {
+    EXPECT_EQ(laser[k], 1134860000000000 + static_cast<Utime>(k) * 1000000) << k;
+  }
+  EXPECT_EQ(log.utimes.at(channels::kGroundTruth), laser);
+  EXPECT_EQ(log.utimes.at(channels::kOdometry), laser);
+  // The ground truth keeps each scan's own pose, in order.
+  const auto gt = log.Decode<bot_core::pose_t>(channels::kGroundTruth, 5);
+  EXPECT_NEAR(gt.pos[0], 2.5, 1e-9);
+
+  // keep: the stamps as printed; by_order with another spacing.
+  CarmenOptions keep;
+  keep.repeated_stamps = "keep";
+  ConvertCarmen(keep, dir.file("s-corrected.log"), dir.file("k.lcmlog"));
+  const auto kept = fl::test::ReadLog(dir.file("k.lcmlog")).utimes.at(channels::kLaser);
+  EXPECT_EQ(kept[0], kept[5]);
+  CarmenOptions fast;
+  fast.by_order_interval_s = 0.1;
+  ConvertCarmen(fast, dir.file("s-corrected.log"), dir.file("f.lcmlog"));
+  const auto spaced = fl::test::ReadLog(dir.file("f.lcmlog")).utimes.at(channels::kLaser);
+  EXPECT_EQ(spaced[7] - spaced[0], 700000);
+}
+
+TEST(CarmenTest, AFewRepeatedStampsAreKeptUnderAuto) {
+  TempDir dir;
+  std::string text;
+  for (int k = 0; k < 8; ++k) {
+    text += fl::test::CarmenFlaser(181, 2.0, 0.5 * k, 0, 0, 10.0 + (k == 4 ? 0.3 : 0.1 * k));
+  }
+  fl::test::WriteText(dir.file("a-corrected.log"), text);
+  const ConvertSummary s =
+      ConvertCarmen(CarmenOptions{}, dir.file("a-corrected.log"), dir.file("o.lcmlog"));
+  const auto laser = fl::test::ReadLog(dir.file("o.lcmlog")).utimes.at(channels::kLaser);
+  EXPECT_EQ(laser[3], laser[4]);  // 1 of 8: kept and warned
+  bool warned = false;
+  for (const auto& w : s.warnings) warned |= w.find("1 scans share the time stamp") != std::string::npos;
+  EXPECT_TRUE(warned);
+}
+
+TEST(CarmenOptionsTest, RepeatedStampsSettingsAreValidated) {
+  CarmenOptions o;
+  o.repeated_stamps = "spread";
+  EXPECT_NE(o.Validate().message().find("auto, keep, by_order"), std::string::npos);
+  o = CarmenOptions{};
+  o.by_order_interval_s = 0.0;
+  EXPECT_FALSE(o.Validate().ok());
 }
 
 // ---- bad input ----

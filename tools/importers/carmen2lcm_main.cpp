@@ -32,7 +32,7 @@ int main(int argc, char** argv) {
                       "logs, GROUND_TRUTH (pose_t, the corrected poses). Corrected logs get\n"
                       "seeded synthetic noisy odometry (see docs/IMPORTERS.md).");
   fl::CommandLine& cli = program.cli();
-  std::string in, out, noisy, timestamp, timestamps_from, ground_truth_from;
+  std::string in, out, noisy, timestamp, timestamps_from, ground_truth_from, repeated_stamps;
   int64_t seed = -1;
   fl::importers::CarmenOptions options;
   program.AddOptions(&options, "a CarmenOptions file, see docs/IMPORTERS.md");
@@ -46,6 +46,10 @@ int main(int argc, char** argv) {
   cli.AddFlag("timestamps-from", &timestamps_from,
               "raw log of the same run: take each scan's time stamp from the raw scan with the "
               "same ranges (e.g. mit-csail.clf for csail-corrected.log.gz)");
+  cli.AddFlag("repeated-stamps", &repeated_stamps,
+              "auto, keep or by_order: scans that repeat the stamp before them (too few "
+              "digits) kept, or every scan stamped by its order (auto: by_order when more "
+              "than a quarter repeat); overrides the config");
   cli.AddFlag("ground-truth-from", &ground_truth_from,
               "raw logs: corrected log of the same run; its poses go to GROUND_TRUTH for the "
               "raw scans with the same ranges (e.g. csail-corrected.log.gz for mit-csail.clf)");
@@ -65,6 +69,7 @@ int main(int argc, char** argv) {
     if (!timestamp.empty()) options.timestamp = timestamp;
     if (!timestamps_from.empty()) options.timestamps_from = timestamps_from;
     if (!ground_truth_from.empty()) options.ground_truth_from = ground_truth_from;
+    if (!repeated_stamps.empty()) options.repeated_stamps = repeated_stamps;
     const fl::Status valid = options.Validate();
     return valid.ok() ? "" : "invalid options: " + valid.message();
   });

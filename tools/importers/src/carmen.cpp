@@ -18,6 +18,7 @@
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
 namespace fl::importers {
@@ -202,6 +203,14 @@ Status CarmenOptions::Validate() const {
   }
   if (!(range_match_tolerance > 0.0) || !std::isfinite(range_match_tolerance)) {
     return Status::Error("range_match_tolerance must be > 0 m");
+  }
+  if (repeated_stamps != "auto" && repeated_stamps != "keep" && repeated_stamps != "by_order") {
+    return Status::Error("repeated_stamps = '" + repeated_stamps +
+                         "' must be one of: auto, keep, by_order");
+  }
+  if (!(by_order_interval_s > 0.0 && by_order_interval_s <= 3600.0)) {
+    return Status::Error("by_order_interval_s = " + std::to_string(by_order_interval_s) +
+                         " must be in (0, 3600] s");
   }
   if (!(fov_deg > 0.0 && fov_deg <= 360.0)) {
     return Status::Error("fov_deg = " + std::to_string(fov_deg) + " must be in (0, 360]");
@@ -530,6 +539,23 @@ void RecoverTimestampsByRanges(const CarmenLog& raw, double tolerance, CarmenLog
   // ODOM lines cannot be matched; they keep their own stamps (only used for raw logs).
 }
 
+int64_t CountRepeatedStamps(const CarmenLog& log) {
+  int64_t n = 0;
+  for (size_t i = 1; i < log.scans.size(); ++i) {
+    if (log.scans[i].utime == log.scans[i - 1].utime) ++n;
+  }
+  return n;
+}
+
+void StampScansByOrder(double interval_s, CarmenLog* log) {
+  if (log->scans.empty()) return;
+  const Utime first = log->scans.front().utime;
+  const Utime step = SecondsToUtime(interval_s);
+  for (size_t k = 0; k < log->scans.size(); ++k) {
+    log->scans[k].utime = first + static_cast<Utime>(k) * step;
+  }
+}
+
 ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in,
                              const std::string& out_log) {
   const Status valid = options.Validate();
@@ -555,6 +581,22 @@ ConvertSummary ConvertCarmen(const CarmenOptions& options, const std::string& in
     summary.notes.push_back("scan time stamps taken from '" + options.timestamps_from +
                             "' by matching ranges (" + std::to_string(log.scans.size()) +
                             " scans matched)");
+  }
+  if (options.timestamps_from.empty()) {
+    const int64_t repeated = CountRepeatedStamps(log);
+    const bool by_order =
+        options.repeated_stamps == "by_order" ||
+        (options.repeated_stamps == "auto" &&
+         repeated * 4 > static_cast<int64_t>(log.scans.size()));
+    if (by_order && repeated > 0) {
+      StampScansByOrder(options.by_order_interval_s, &log);
+      summary.warnings.push_back(
+          std::to_string(repeated) + " of " + std::to_string(log.scans.size()) +
+          " scans repeat the time stamp before them (too few digits in the log?): every scan "
+          "is stamped by its order instead, " + FormatDouble(options.by_order_interval_s) +
+          " s apart (repeated_stamps: by_order; the time is synthetic, the order is the "
+          "log's). Give --timestamps-from RAW_LOG of the same run to recover the real stamps");
+    }
   }
   const bool corrected = IsCorrectedCarmenLog(options, in);
 

@@ -99,6 +99,17 @@ struct CarmenOptions {
   std::string ground_truth_from;
   double range_match_tolerance = 0.006;  // [m] max per-beam difference for a match
   double fov_deg = 180.0;                // [deg] field of view of FLASER scans (CARMEN: 180)
+  // Scans whose time stamp repeats the one before (a log printed with too few digits, such as
+  // csail-corrected.log.gz: 406 scans, 2 distinct stamps 10^4 s apart), when timestamps_from
+  // is not given:
+  // "keep": kept as they are (warned; an evaluation keeps one pose per stamp).
+  // "by_order": every scan is stamped by its place in the file, the first scan's stamp plus
+  //   index * by_order_interval_s, so that scans, odometry and ground truth pair up by order
+  //   (warned: the time is synthetic, only the order is the log's).
+  // "auto": by_order when more than a quarter of the scans repeat a stamp, else keep.
+  std::string repeated_stamps = "auto";
+  double by_order_interval_s = 1.0;  // [s] scan spacing of by_order (corrected logs keep
+                                     // about one scan per metre or per 0.5 rad of travel)
 
   template <class A>
   void Serialize(A* a) {
@@ -110,6 +121,8 @@ struct CarmenOptions {
     a->Visit("ground_truth_from", &ground_truth_from);
     a->Visit("range_match_tolerance", &range_match_tolerance);
     a->Visit("fov_deg", &fov_deg);
+    a->Visit("repeated_stamps", &repeated_stamps);
+    a->Visit("by_order_interval_s", &by_order_interval_s);
   }
   Status Validate() const;
 };
@@ -202,6 +215,13 @@ std::vector<size_t> MatchScansByRanges(const CarmenLog& superset, const CarmenLo
 // Replaces each scan's utime with the utime of the matching scan in `raw` (see
 // CarmenOptions::timestamps_from). Throws naming the first unmatched scan's line.
 void RecoverTimestampsByRanges(const CarmenLog& raw, double tolerance, CarmenLog* log);
+
+// The number of scans whose utime equals the scan before's.
+int64_t CountRepeatedStamps(const CarmenLog& log);
+
+// CarmenOptions::repeated_stamps = by_order: scan k gets the first scan's utime plus
+// k * interval_s. ODOM lines are left alone (a corrected log ignores them).
+void StampScansByOrder(double interval_s, CarmenLog* log);
 
 // Converts `in` to the LCM log `out_log` (written to out_log.partial, renamed when complete;
 // on any error nothing is left at out_log and the exception is rethrown).
