@@ -43,7 +43,7 @@ TEST(BenchLaserMain, RelationsBesideALogAreScoredOnEveryRunAndTheMean) {
                       "103.0 104.0 1.0 0 0 0 0 0.2\n"
                       "103.0 250.0 1.0 0 0 0 0 0.2\n");
   const auto r = RunCommand(BinDir() + "/fl-bench-laser --data " + dir.path() +
-                                " --seeds 1,2 --json out.json --png-dir png --refit=false",
+                                " --seeds 1,2 --json out.json --png-dir png --refit=false --sim-worlds=",
                             dir);
   ASSERT_EQ(r.status, 0) << r.out << r.err;
   const std::string json = ReadFile(dir.file("out.json"));
@@ -60,6 +60,26 @@ TEST(BenchLaserMain, RelationsBesideALogAreScoredOnEveryRunAndTheMean) {
   // No relations file: no relation columns.
   EXPECT_TRUE(std::isnan(Metric(json, "other-corrected/s1", "relations_used"))) << json;
   EXPECT_TRUE(std::isfinite(Metric(json, "other-corrected/s1", "ate_rmse_m"))) << json;
+  // The odometry the SLAM started from, scored the same way, on every run.
+  for (const std::string run : {"arc-corrected/s1", "other-corrected/s2", "other-corrected mean"}) {
+    const double odo = Metric(json, run, "odometry_ate_rmse_m");
+    EXPECT_TRUE(std::isfinite(odo) && odo > 0) << run << " " << odo;
+    if (run.find("mean") != std::string::npos) continue;  // a mean of ratios, not a ratio
+    EXPECT_NEAR(Metric(json, run, "ate_over_odometry"), Metric(json, run, "ate_rmse_m") / odo,
+                1e-3 * Metric(json, run, "ate_over_odometry") + 1e-6)
+        << run;
+  }
+}
+
+TEST(BenchLaserMain, AMissingSimulatedWorldIsAUsageErrorNamingTheFile) {
+  TempDir dir;
+  std::filesystem::create_directories(dir.file("laser"));
+  fl::test::WriteText(dir.file("laser/arc-corrected.log"), fl::test::CarmenArcLog(20));
+  const auto r = RunCommand(BinDir() + "/fl-bench-laser --data " + dir.path() +
+                                " --seeds 1 --json out.json --png-dir png --refit=false",
+                            dir);
+  EXPECT_EQ(r.status, 2) << r.out << r.err;
+  EXPECT_NE(r.err.find("config/sim_paper.yaml not found"), std::string::npos) << r.err;
 }
 
 }  // namespace
