@@ -3,12 +3,16 @@
 #   fl_target_flags(<target>)   adds the project warning set to a target.
 #
 # Options:
-#   FL_SANITIZE=ON      build everything with AddressSanitizer + UBSan.
+#   FL_SANITIZE=ON      build everything with AddressSanitizer + UBSan
+#                       (`./fusionloc test --sanitize` runs the whole suite on it).
+#   FL_TSAN=ON          build with ThreadSanitizer (`./fusionloc test --tsan` builds the target
+#                       fl_thread_tests and runs the tests labelled `threads` on it).
 #   FL_WERROR=ON        turn warnings into errors (CI uses this).
 #   FL_FUZZ=ON          clang only: instrument everything for libFuzzer + ASan + UBSan and
 #                       add the fuzz targets fl-fuzz-* (tests/fuzz; `./fusionloc fuzz`).
 
 option(FL_SANITIZE "Build with address and undefined-behaviour sanitizers" OFF)
+option(FL_TSAN "Build with ThreadSanitizer" OFF)
 option(FL_WERROR "Treat compiler warnings as errors" OFF)
 option(FL_FUZZ "Build the libFuzzer targets (clang; tests/fuzz)" OFF)
 
@@ -34,6 +38,15 @@ if(FL_SANITIZE)
   add_compile_definitions(EIGEN_MALLOC_ALREADY_ALIGNED=1)
 endif()
 
+if(FL_TSAN)
+  if(FL_SANITIZE OR FL_FUZZ)
+    message(FATAL_ERROR "FL_TSAN=ON cannot be combined with FL_SANITIZE or FL_FUZZ (one sanitizer "
+                        "runtime per program): use a separate build folder")
+  endif()
+  add_compile_options(-fsanitize=thread -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=thread)
+endif()
+
 if(FL_FUZZ)
   if(NOT CMAKE_CXX_COMPILER_ID MATCHES "Clang")
     message(FATAL_ERROR "FL_FUZZ=ON needs clang (libFuzzer): configure with "
@@ -45,6 +58,14 @@ if(FL_FUZZ)
                       -fno-sanitize-recover=undefined -fno-omit-frame-pointer)
   add_link_options(-fsanitize=address,undefined -fno-sanitize=vptr)
   add_compile_definitions(EIGEN_MALLOC_ALREADY_ALIGNED=1)
+endif()
+
+# fl_programs: every fl-* program; fl_thread_tests: the tests labelled `threads` and every
+# program (a test may run programs as processes), what the ThreadSanitizer suite builds.
+if(NOT TARGET fl_programs)
+  add_custom_target(fl_programs)
+  add_custom_target(fl_thread_tests)
+  add_dependencies(fl_thread_tests fl_programs)
 endif()
 
 function(fl_target_flags target)
@@ -60,13 +81,20 @@ function(fl_executable name)
   add_executable(fl-${name} ${ARG_SOURCES})
   target_link_libraries(fl-${name} PRIVATE ${ARG_LIBS})
   fl_target_flags(fl-${name})
+  add_dependencies(fl_programs fl-${name})
 endfunction()
 
-# fl_test(<name> SOURCES ... LIBS ... [LABELS ...] [SERIAL]): a GoogleTest binary registered with
-# ctest. SERIAL: its tests run alone (ctest RUN_SERIAL), for live multi-process runs whose
-# accuracy must not depend on what else the machine is running.
+# fl_test(<name> SOURCES ... LIBS ... [LABELS ...] [SERIAL] [THREADS]): a GoogleTest binary
+# registered with ctest. SERIAL: its tests run alone (ctest RUN_SERIAL), for live multi-process
+# runs whose accuracy must not depend on what else the machine is running. THREADS: the test
+# starts threads (its own, or through the programs it runs): labelled `threads` and part of
+# the target fl_thread_tests, which the ThreadSanitizer suite builds (`fusionloc test --tsan`).
 function(fl_test name)
-  cmake_parse_arguments(ARG "SERIAL" "TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "SERIAL;THREADS" "TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+  if(ARG_THREADS)
+    list(APPEND ARG_LABELS threads)
+    add_dependencies(fl_thread_tests ${name})
+  endif()
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
   target_compile_definitions(${name} PRIVATE
