@@ -12,6 +12,9 @@
 // the reference relative pose (x, y, yaw); about 3 (median 2.37) when the information is
 // calibrated. With --sim-worlds the simulated worlds of fl::sim (config/sim_<world>.yaml,
 // laser and wheel odometry only, camera off) are run the same way against their ground truth.
+// With --peers a peer laser SLAM runs side by side on each raw CARMEN log (MRPT's rbpf-slam,
+// peers/mrpt_rbpf.hpp) and is scored by the same code; the comparison (ours, the peer, peer over
+// ours) is its own table, recorded in its own section (bench:laser-peers).
 #include <unistd.h>
 
 #include <algorithm>
@@ -38,6 +41,7 @@
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
 #include "fusionloc/sim/simulator.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
+#include "peers/mrpt_rbpf.hpp"
 #include "reference_refit.hpp"
 
 namespace fs = std::filesystem;
@@ -213,6 +217,90 @@ fl::importers::CarmenNoiseModel ScaledNoise(double scale) {
   return n;
 }
 
+// The Kuemmerle et al. 2009 relation columns of a final trajectory (a pose for every scan) and,
+// if given, an online pose stream: one place for our runs and the peers'.
+void AddRelationColumns(const fl::eval::Trajectory& final_trajectory,
+                        const fl::eval::Trajectory* online,
+                        const std::vector<fl::eval::Relation>& relations, fl::Utime max_dt,
+                        fl::bench::Run* run) {
+  const fl::eval::RelationResult fr =
+      fl::eval::ComputeRelationError(final_trajectory, relations, max_dt);
+  run->Add("relation_trans_mean_m", fr.trans_m.mean)
+      .Add("relation_trans_std_m", fr.trans_m.std)
+      .Add("relation_rot_mean_deg", fr.rot_deg.mean)
+      .Add("relation_rot_std_deg", fr.rot_deg.std)
+      .Add("relations_used", static_cast<double>(fr.used))
+      .Add("relations_total", static_cast<double>(relations.size()));
+  if (online) {
+    const fl::eval::RelationResult onr = fl::eval::ComputeRelationError(*online, relations, max_dt);
+    run->Add("online_relation_trans_mean_m", onr.trans_m.mean)
+        .Add("online_relation_rot_mean_deg", onr.rot_deg.mean);
+  }
+}
+
+// The columns of the peers' table (bench:laser-peers), in this order, for ours and each peer.
+const std::vector<std::string>& PeerColumns() {
+  static const std::vector<std::string> keys = {
+      "relation_trans_mean_m", "relation_trans_std_m", "relation_rot_mean_deg",
+      "relation_rot_std_deg", "relations_used", "online_relation_trans_mean_m",
+      "online_relation_rot_mean_deg", "ate_rmse_m", "ate_rmse_deg", "rpe_trans_m",
+      "ms_per_item_mean", "ms_per_item_p95", "ms_per_processed_mean", "items", "processed",
+      "peak_rss_mb"};
+  return keys;
+}
+// Of these, the ones whose ratio peer / ours is reported.
+const std::vector<std::string>& PeerRatioColumns() {
+  static const std::vector<std::string> keys = {
+      "relation_trans_mean_m", "relation_trans_std_m", "relation_rot_mean_deg",
+      "relation_rot_std_deg", "online_relation_trans_mean_m", "online_relation_rot_mean_deg",
+      "ate_rmse_m", "ms_per_item_mean", "ms_per_processed_mean", "peak_rss_mb"};
+  return keys;
+}
+
+bool HasMetric(const fl::bench::Run& r, const std::string& key) {
+  for (const auto& [k, v] : r.metrics)
+    if (k == key) return true;
+  return false;
+}
+
+// `r` reduced to the peers' columns (those it has), under `name`.
+fl::bench::Run PeerRow(const fl::bench::Run& r, const std::string& name) {
+  fl::bench::Run out;
+  out.name = name;
+  out.input = r.input;
+  for (const std::string& key : PeerColumns())
+    if (HasMetric(r, key)) out.Add(key, r.Get(key));
+  return out;
+}
+
+// Peer over ours for the ratio columns both have (-1 where ours is 0).
+fl::bench::Run RatioRow(const fl::bench::Run& peer, const fl::bench::Run& ours,
+                        const std::string& name) {
+  fl::bench::Run out;
+  out.name = name;
+  out.input = peer.input;
+  for (const std::string& key : PeerRatioColumns()) {
+    if (!HasMetric(peer, key) || !HasMetric(ours, key)) continue;
+    const double o = ours.Get(key);
+    out.Add(key, o != 0.0 ? peer.Get(key) / o : -1.0);
+  }
+  return out;
+}
+
+// An executable: `name` itself if it has a '/', else the first match on PATH ("" if none).
+std::string FindProgram(const std::string& name) {
+  if (name.find('/') != std::string::npos) return access(name.c_str(), X_OK) == 0 ? name : "";
+  const char* path = std::getenv("PATH");
+  std::string p = path ? path : "";
+  for (size_t a = 0, b; a <= p.size(); a = b + 1) {
+    b = p.find(':', a);
+    if (b == std::string::npos) b = p.size();
+    const std::string candidate = p.substr(a, b - a) + "/" + name;
+    if (b > a && access(candidate.c_str(), X_OK) == 0) return candidate;
+  }
+  return "";
+}
+
 // Laser scans, odometry and ground truth of a simulated world (camera off).
 LogData SimulateWorld(fl::sim::SimOptions so) {
   so.camera.enabled = false;
@@ -293,7 +381,55 @@ int main(int argc, char** argv) {
   bool dump = false;
   cli.AddFlag("dump", &dump,
               "also write the estimate and reference trajectories (TUM) next to the PNGs");
+  bool peers = false;
+  cli.AddFlag("peers", &peers,
+              "also run the peer laser SLAM side by side on each raw CARMEN log (mit-csail.clf): "
+              "MRPT's rbpf-slam (Debian mrpt-apps) with --peers-config, its input written by "
+              "fl-mrpt-rawlog from the same CARMEN reader, its most likely particle's path scored "
+              "like ours; prints and records a table of ours, the peer and peer/ours "
+              "(bench:laser-peers, JSON NAME-peers.json). `./fusionloc bench laser --peers` "
+              "installs MRPT and builds fl-mrpt-rawlog");
+  std::string peers_config = "config/peers/mrpt_rbpf_slam.ini";
+  cli.AddFlag("peers-config", &peers_config, "--peers: MRPT's rbpf-slam ini");
+  std::string peers_rawlog_tool;
+  cli.AddFlag("peers-rawlog-tool", &peers_rawlog_tool,
+              "--peers: the rawlog writer (default: fl-mrpt-rawlog beside this program)");
+  std::string peers_rbpf_slam = "rbpf-slam";
+  cli.AddFlag("peers-rbpf-slam", &peers_rbpf_slam, "--peers: MRPT's rbpf-slam program");
+  cli.AddEpilog(
+      "\nRecording (--record FILE.md): the laser section of FILE.md is rewritten with this "
+      "run's table; with --peers the comparison goes to its own section (bench:laser-peers), "
+      "and with --peers --only the laser section is left alone (a table of some logs would "
+      "replace the full one; the JSON is still written).\n");
   if (!program.Parse(argc, argv)) return program.exit_code();
+  if (peers) {
+    if (peers_rawlog_tool.empty()) {
+      std::error_code e;
+      const fs::path self = fs::read_symlink("/proc/self/exe", e);
+      peers_rawlog_tool = (e ? fs::path(argv[0]).parent_path() : self.parent_path()).string() +
+                          "/fl-mrpt-rawlog";
+    }
+    if (!fs::is_regular_file(peers_config)) {
+      std::cerr << "fl-bench-laser: --peers-config " << peers_config
+                << " not found; run from the repository's root or pass --peers-config FILE\n";
+      return 2;
+    }
+    if (FindProgram(peers_rawlog_tool).empty()) {
+      std::cerr << "fl-bench-laser: --peers: " << peers_rawlog_tool
+                << " is not there: it is built only when CMake finds MRPT; "
+                   "`./fusionloc bench laser --peers` installs libmrpt-obs-dev and mrpt-apps "
+                   "and builds it (or pass --peers-rawlog-tool)\n";
+      return 2;
+    }
+    const std::string found = FindProgram(peers_rbpf_slam);
+    if (found.empty()) {
+      std::cerr << "fl-bench-laser: --peers: MRPT's " << peers_rbpf_slam
+                << " not found; install Debian's mrpt-apps (`./fusionloc bench laser --peers` "
+                   "does) or pass --peers-rbpf-slam PROGRAM\n";
+      return 2;
+    }
+    peers_rbpf_slam = found;
+  }
   if (const fl::Status s = refit_options.Validate(); !s.ok()) {
     std::cerr << "fl-bench-laser: --refit-pairs: " << s.message() << "\n";
     return 2;
@@ -387,6 +523,7 @@ int main(int argc, char** argv) {
   }
 
   fl::bench::Report report("laser");
+  fl::bench::Report peer_report("laser-peers");
   const std::string tmp =
       (fs::temp_directory_path() / ("fl_bench_laser_" + std::to_string(getpid()))).string();
   fs::create_directories(tmp);
@@ -549,18 +686,7 @@ int main(int argc, char** argv) {
           // Kuemmerle et al. 2009: the final trajectory (a pose for every scan) and the online
           // pose against the log's hand-checked relations.
           if (relations.empty()) relations = fl::eval::ReadRelations(in.relations);
-          const fl::eval::RelationResult fr =
-              fl::eval::ComputeRelationError(est, relations, max_dt);
-          const fl::eval::RelationResult onr =
-              fl::eval::ComputeRelationError(online, relations, max_dt);
-          run.Add("relation_trans_mean_m", fr.trans_m.mean)
-              .Add("relation_trans_std_m", fr.trans_m.std)
-              .Add("relation_rot_mean_deg", fr.rot_deg.mean)
-              .Add("relation_rot_std_deg", fr.rot_deg.std)
-              .Add("relations_used", static_cast<double>(fr.used))
-              .Add("relations_total", static_cast<double>(relations.size()))
-              .Add("online_relation_trans_mean_m", onr.trans_m.mean)
-              .Add("online_relation_rot_mean_deg", onr.rot_deg.mean);
+          AddRelationColumns(est, &online, relations, max_dt, &run);
         }
         if (refit && in.sim_config.empty()) {
           int refit_edges = 0;
@@ -652,8 +778,110 @@ int main(int argc, char** argv) {
                   "is smaller)";
       report.AddRun(mean);
     }
+    // The peer on a raw CARMEN log (its own odometry: corrected logs get our seeded synthetic
+    // noise, which the peer's reader does not see), once: its seed is in its ini.
+    if (peers && in.sim_config.empty() && !seed_runs.empty() &&
+        !fl::importers::IsCorrectedCarmenLog(fl::importers::CarmenOptions{}, in.log)) {
+      const fl::bench::Run ours = seed_runs.size() > 1 ? report.runs().back() : seed_runs.front();
+      const std::string peer_name = in.name + "/mrpt-rbpf";
+      try {
+        fl::peers::MrptRbpfOptions po;
+        po.ini = peers_config;
+        po.rawlog_tool = peers_rawlog_tool;
+        po.rbpf_slam = peers_rbpf_slam;
+        po.work_dir = tmp + "/" + in.name + "-mrpt";
+        po.label = "[bench laser] " + peer_name;
+        const fl::peers::MrptRbpfRun pr = fl::peers::RunMrptRbpf(po, in.log);
+        const fl::eval::Trajectory& est = pr.final_trajectory;
+        const fl::eval::AteResult ate =
+            fl::eval::ComputeAte(est, reference, fl::eval::Alignment::kSE2, max_dt);
+        const fl::eval::RpeResult rpe =
+            fl::eval::ComputeRpe(est, reference, 1, fl::eval::DeltaUnit::kFrames, max_dt);
+        std::vector<double> ms_filter;
+        for (size_t i = 0; i < pr.steps.size(); ++i)
+          if (pr.steps[i].filter) ms_filter.push_back(pr.ms_per_step[i]);
+        const fl::bench::Stats sa = fl::bench::ComputeStats(pr.ms_per_step);
+        const fl::bench::Stats sp = fl::bench::ComputeStats(ms_filter);
+        fl::bench::Run run;
+        run.name = peer_name;
+        run.input = in.log;
+        run.Add("ate_rmse_m", ate.trans_m.rmse)
+            .Add("ate_rmse_deg", ate.rot_deg.rmse)
+            .Add("rpe_trans_m", rpe.trans_m.mean)
+            .Add("rpe_rot_deg", rpe.rot_deg.mean)
+            .Add("ms_per_item_mean", sa.mean)
+            .Add("ms_per_item_p95", sa.p95)
+            .Add("ms_per_processed_mean", sp.mean)
+            .Add("ms_per_processed_p95", sp.p95)
+            .Add("items", static_cast<double>(pr.steps.size()))
+            .Add("processed", static_cast<double>(pr.filter_steps))
+            .Add("inserted", static_cast<double>(pr.inserted_steps))
+            .Add("peak_rss_mb", pr.peak_rss_mb)
+            .Add("cpu_s", pr.cpu_s)
+            .Add("wall_s", pr.wall_s);
+        if (!relations.empty()) AddRelationColumns(est, &pr.online, relations, max_dt, &run);
+        // Its map beside ours, and (--dump) its trajectory in the evaluator's TUM format.
+        for (fs::directory_iterator it(pr.output_dir, ec), end; !ec && it != end;
+             it.increment(ec)) {
+          const std::string f = it->path().filename().string();
+          if (f.rfind("finalMap", 0) == 0 && it->path().extension() == ".png") {
+            fs::create_directories(png_dir);
+            fs::copy_file(it->path(), png_dir + "/" + in.name + "-mrpt.png",
+                          fs::copy_options::overwrite_existing, ec);
+            break;
+          }
+        }
+        if (dump) fl::eval::WriteTrajectoryTum(est, png_dir + "/" + in.name + "-mrpt.est.tum");
+        char cpu[160];
+        std::snprintf(cpu, sizeof(cpu),
+                      "%.1f s CPU, %.1f s wall for the whole process (%.1f ms CPU per scan)",
+                      pr.cpu_s, pr.wall_s,
+                      1e3 * pr.cpu_s / std::max<double>(1.0, static_cast<double>(pr.steps.size())));
+        run.note = "MRPT rbpf-slam (" + peers_config +
+                   "): final trajectory = its most likely particle's path, a pose for every "
+                   "scan (between its filter updates: the last path pose and the odometry since), "
+                   "online = its particles' weighted mean at each step; ms_per_item = wall time "
+                   "of each step's processActionObservation (its log_times.txt), as ours is of "
+                   "AddScan; processed = steps with a filter update; peak_rss_mb = the rbpf-slam "
+                   "process's ru_maxrss (ours: this process's VmHWM); " + std::string(cpu);
+        peer_report.AddRun(PeerRow(ours, ours.name));
+        fl::bench::Run peer_row = PeerRow(run, run.name);
+        peer_row.note = run.note;
+        peer_report.AddRun(peer_row);
+        fl::bench::Run ratio = RatioRow(run, ours, in.name + " mrpt-rbpf/ours");
+        ratio.note = "peer over ours (" + ours.name + "): > 1 = the peer's error, time or memory "
+                     "is larger";
+        peer_report.AddRun(ratio);
+      } catch (const std::exception& e) {
+        std::cerr << "fl-bench-laser: " << peer_name << ": " << e.what() << "\n";
+        ++failures;
+      }
+    }
   }
   if (!std::getenv("FL_BENCH_KEEP_TMP")) fs::remove_all(tmp, ec);
-  fl::bench::Publish(report, args);
+  fl::bench::CommonArgs laser_args = args;
+  if (peers && !only.empty() && !laser_args.record.empty()) {
+    laser_args.record.clear();
+    std::cerr << "fl-bench-laser: --peers --only " << only << ": not recording the laser section "
+              << "of " << args.record << " (it holds the full run; this one covers some logs); "
+              << "the peers' table is recorded in its own section\n";
+  }
+  fl::bench::Publish(report, laser_args);
+  if (peers) {
+    fl::bench::CommonArgs peer_args = args;
+    if (!peer_args.json.empty()) {
+      const fs::path j(peer_args.json);
+      peer_args.json = (j.parent_path() / (j.stem().string() + "-peers" + j.extension().string()))
+                           .string();
+    }
+    if (peer_report.runs().empty()) {
+      std::cerr << "fl-bench-laser: --peers: no raw CARMEN log ran (the peer runs on raw logs "
+                   "such as mit-csail.clf)\n";
+      ++failures;
+    } else {
+      std::cout << "\n";
+      fl::bench::Publish(peer_report, peer_args);
+    }
+  }
   return failures == 0 ? 0 : 1;
 }
