@@ -14,6 +14,7 @@
 
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/fused_pose_t.hpp"
+#include "sanitizer_slack.hpp"
 #include "test_paths.hpp"
 
 namespace {
@@ -94,9 +95,12 @@ TEST(EmulatedRobot, ThreeDriversUnderOneDeputyGiveFusedPoses) {
   EXPECT_GE(count["ODOMETRY"], 250);
   EXPECT_GE(count["STEREO"], 8);
   EXPECT_GE(count["LASER_TO_BASE"], 5);
-  EXPECT_GE(count["RBPF_POSE"], count["LASER"] - 10);
-  EXPECT_GE(count["VO_POSE"], count["STEREO"] - 3);
-  EXPECT_GE(count["FUSED_POSE"], count["LASER"] - 15);
+  // The first scans go by while the estimators and the fusion start; in a sanitizer build
+  // (instrumented code, 2-15x slower) they start later, so twice the allowance.
+  const int late = fl::test::SanitizerTimingSlack() > 1.0 ? 2 : 1;
+  EXPECT_GE(count["RBPF_POSE"], count["LASER"] - 10 * late);
+  EXPECT_GE(count["VO_POSE"], count["STEREO"] - 3 * late);
+  EXPECT_GE(count["FUSED_POSE"], count["LASER"] - 15 * late);
   EXPECT_GE(count["STATUS_FL_URG_DRIVER"], 3);
   EXPECT_GE(count["STATUS_FL_BASE_DRIVER"], 3);
   EXPECT_GE(count["STATUS_FL_STEREO_DRIVER"], 3);
