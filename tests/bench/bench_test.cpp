@@ -90,7 +90,10 @@ TEST(Bench, PeakRssRisesByTheMemoryTouchedAndStays) {
   EXPECT_GT(peak_with, peak_before + 40.0);
   // (The kernel syncs its per-thread RSS counters in batches of up to 64 pages.)
   EXPECT_GT(PeakRssMb(), peak_with - 0.5) << "after freeing the 50 MB";
+#if !defined(__SANITIZE_ADDRESS__)
+  // (Under AddressSanitizer freed blocks stay in its quarantine, resident, by design.)
   EXPECT_LT(CurrentRssMb(), peak_with - 40.0) << "the 50 MB are given back";
+#endif
 }
 
 }  // namespace
