@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <vector>
+
 namespace fl {
 namespace {
 
@@ -59,6 +62,54 @@ TEST(StreamMerger, RejectsTimeGoingBackwardsAndLateItems) {
   const Status late = m2.Push(d, 50, 9);
   EXPECT_FALSE(late.ok());
   EXPECT_NE(late.message().find("stream 'D'"), std::string::npos);
+}
+
+// A stream whose clock jumps a minute ahead is rejected while the other stream is still
+// arriving, and accepted again once its stamps agree; nothing of the other stream is lost.
+TEST(StreamMerger, ClockJumpingForwardIsRejectedUntilConsistent) {
+  StreamMerger<int> m(300000);  // 0.3 s latency, so the lead allowed is 1.3 s
+  const int laser = m.AddStream("LASER"), odom = m.AddStream("ODOMETRY");
+  std::vector<int> out;
+  StreamMerger<int>::Item it;
+  int rejected = 0;
+  for (int i = 0; i < 100; ++i) {  // 10 s at 10 Hz; the laser 60 s ahead for i in [40, 50)
+    const Utime t = 100000 * i;
+    ASSERT_TRUE(m.Push(odom, t, 1000 + i, /*arrival=*/t).ok());
+    const Utime stamp = (i >= 40 && i < 50) ? t + 60000000 : t + 50000;
+    const Status s = m.Push(laser, stamp, i, /*arrival=*/t + 50000);
+    if (!s.ok()) {
+      ++rejected;
+      EXPECT_NE(s.message().find("clock jumped forward"), std::string::npos) << s.message();
+    }
+    while (m.Pop(&it)) out.push_back(it.value);
+  }
+  EXPECT_EQ(rejected, 10);
+  m.Flush();
+  while (m.Pop(&it)) out.push_back(it.value);
+  int odometry = 0, scans = 0;
+  for (int v : out) (v >= 1000 ? odometry : scans)++;
+  EXPECT_EQ(odometry, 100);
+  EXPECT_EQ(scans, 90);
+  EXPECT_TRUE(std::is_sorted(out.begin(), out.end(), [](int a, int b) {
+    auto time = [](int v) { return v >= 1000 ? 100000 * (v - 1000) : 100000 * v + 50000; };
+    return time(a) < time(b);
+  }));
+}
+
+// Without arrival times, or once the other stream has gone silent, there is nothing to
+// compare with: a stream alone is never held back by the check.
+TEST(StreamMerger, ClockCheckNeedsAStreamStillArriving) {
+  StreamMerger<int> m(300000);
+  const int a = m.AddStream("A"), b = m.AddStream("B");
+  ASSERT_TRUE(m.Push(b, 0, 0, 0).ok());
+  EXPECT_TRUE(m.Push(a, 60000000, 1).ok());  // no arrival given
+  StreamMerger<int> n(300000);
+  const int c = n.AddStream("C"), d = n.AddStream("D");
+  ASSERT_TRUE(n.Push(d, 0, 0, 0).ok());
+  // D last arrived 5 s ago (silent): C's stamps far ahead of D's are accepted.
+  EXPECT_TRUE(n.Push(c, 5000000, 1, 5000000).ok());
+  // D arriving again but behind: D is the one compared with C now, and D is not ahead.
+  EXPECT_TRUE(n.Push(d, 5100000, 2, 5100000).ok());
 }
 
 }  // namespace

@@ -12,6 +12,14 @@
 // item seen (a silent stream cannot stall the others). Items whose time goes backwards within
 // their stream, or that arrive after items of a later time were already released, are rejected
 // with a reason; the caller counts and reports them.
+//
+// A clock that jumps forward (a sensor's stamps suddenly a minute ahead) would otherwise
+// release everything queued and then reject every other stream as late until real time caught
+// up. When the caller passes each item's arrival time (its receive time live, the log time in
+// replay), an item stamped more than max_lead_us ahead of the newest stamp of another stream
+// that is still arriving (an item of it arrived within max_lead_us) is rejected instead, and the
+// stream is accepted again as soon as its stamps agree with the others. A stream alone, or
+// whose peers have gone silent, is not checked (nothing to compare with).
 #pragma once
 
 #include <cstdint>
@@ -21,6 +29,7 @@
 #include <utility>
 #include <vector>
 
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
 
@@ -35,15 +44,39 @@ class StreamMerger {
     T value;
   };
 
-  explicit StreamMerger(Utime max_latency_us = 200000) : max_latency_us_(max_latency_us) {}
+  static constexpr Utime kNoArrival = std::numeric_limits<Utime>::min();
+
+  // max_lead_us: how far [us] one stream's stamps may run ahead of another's (see the file
+  // comment); 0 means max_latency_us + 1 s.
+  explicit StreamMerger(Utime max_latency_us = 200000, Utime max_lead_us = 0)
+      : max_latency_us_(max_latency_us),
+        max_lead_us_(max_lead_us > 0 ? max_lead_us : max_latency_us + 1000000) {}
 
   int AddStream(const std::string& name) {
-    streams_.push_back(Stream{name, {}, std::numeric_limits<Utime>::min()});
+    streams_.push_back(Stream{name, {}, std::numeric_limits<Utime>::min(), kNoArrival});
     return static_cast<int>(streams_.size()) - 1;
   }
 
-  Status Push(int stream, Utime utime, T value) {
+  // `arrival` [us]: when the item arrived (receive time live, log time in replay), for the
+  // clock-jump check; kNoArrival skips it.
+  Status Push(int stream, Utime utime, T value, Utime arrival = kNoArrival) {
     Stream& s = streams_.at(static_cast<size_t>(stream));
+    if (arrival != kNoArrival) {
+      for (const Stream& other : streams_) {
+        if (&other == &s || other.last_arrival == kNoArrival ||
+            arrival - other.last_arrival > max_lead_us_) {
+          continue;  // silent or never heard: nothing to compare with
+        }
+        if (utime - other.last_utime > max_lead_us_) {
+          return Status::Error(
+              "stream '" + s.name + "': time stamp " + FormatUtime(utime) + " is " +
+              FormatDouble(1e-6 * static_cast<double>(utime - other.last_utime)) +
+              " s ahead of stream '" + other.name + "' (" + FormatUtime(other.last_utime) +
+              "): its clock jumped forward; message dropped until the stamps "
+              "agree again");
+        }
+      }
+    }
     if (utime < s.last_utime) {
       return Status::Error("stream '" + s.name + "': time went backwards (" + FormatUtime(utime) +
                            " after " + FormatUtime(s.last_utime) + "); message dropped");
@@ -54,6 +87,7 @@ class StreamMerger {
                            " was processed (more than the merge latency late); dropped");
     }
     s.last_utime = utime;
+    if (arrival != kNoArrival) s.last_arrival = arrival;
     if (utime > newest_utime_) newest_utime_ = utime;
     s.queue.push_back(Item{utime, stream, std::move(value)});
     return Status::Ok();
@@ -94,8 +128,10 @@ class StreamMerger {
     std::string name;
     std::deque<Item> queue;
     Utime last_utime;
+    Utime last_arrival;  // [us] of its last accepted item; kNoArrival if none was given
   };
   Utime max_latency_us_;
+  Utime max_lead_us_;
   std::vector<Stream> streams_;
   Utime newest_utime_ = std::numeric_limits<Utime>::min();
   Utime released_utime_ = std::numeric_limits<Utime>::min();

@@ -106,14 +106,14 @@ ScanOdometrySync::ScanOdometrySync(double merge_latency_s, bool use_odometry)
   if (use_odometry_) odom_stream_ = merger_.AddStream(channels::kOdometry);
 }
 
-Status ScanOdometrySync::PushScan(LaserScan scan) {
+Status ScanOdometrySync::PushScan(LaserScan scan, Utime arrival) {
   const Utime t = scan.utime;
-  return merger_.Push(laser_stream_, t, Input(std::move(scan)));
+  return merger_.Push(laser_stream_, t, Input(std::move(scan)), arrival);
 }
 
-Status ScanOdometrySync::PushOdometry(Utime utime, const Pose2& odom) {
+Status ScanOdometrySync::PushOdometry(Utime utime, const Pose2& odom, Utime arrival) {
   if (!use_odometry_) return Status::Ok();
-  return merger_.Push(odom_stream_, utime, Input(odom));
+  return merger_.Push(odom_stream_, utime, Input(odom), arrival);
 }
 
 void ScanOdometrySync::Process(bool flush, const OnScan& on_scan,
@@ -228,6 +228,7 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
   if (!node_options_.no_odometry) {
     lcm_->Subscribe<fusionloc::wheel_odometry_t>(
         ch_odometry_, [this](const fusionloc::wheel_odometry_t& m, const std::string&) {
+          status_.CountIn(ch_odometry_, m.utime);
           // Odometry further than kMaxOdometryM from its origin is corrupt: poses that far
           // have no grid cell (the map's cell indices are ints).
           if (!PlausiblePose(Pose2(m.x, m.y, m.theta), kMaxOdometryM)) {
@@ -235,8 +236,12 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
                                  std::to_string(kMaxOdometryM) + " m; dropped");
             return;
           }
-          const Status st = sync_.PushOdometry(m.utime, Pose2(m.x, m.y, m.theta));
-          if (!st.ok()) warn_.Warn(st.message());
+          const Status st = sync_.PushOdometry(m.utime, Pose2(m.x, m.y, m.theta),
+                                               lcm_->last_message_utime());
+          if (!st.ok()) {
+            status_.CountDropped(st.message());
+            warn_.Warn(st.message());
+          }
         });
   }
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_laser_);
@@ -269,8 +274,8 @@ void RbpfSlamNode::OnLaserToBase(const Pose2& T) {
 }
 
 void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
-  status_.CountIn();
-  const Status st = sync_.PushScan(ScanFromLcm(m));
+  status_.CountIn(ch_laser_, m.utime);
+  const Status st = sync_.PushScan(ScanFromLcm(m), lcm_->last_message_utime());
   if (!st.ok()) {
     status_.CountDropped(st.message());
     warn_.Warn(st.message());

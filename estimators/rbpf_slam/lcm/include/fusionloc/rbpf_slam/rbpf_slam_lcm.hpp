@@ -53,9 +53,12 @@ class ScanOdometrySync {
 
   ScanOdometrySync(double merge_latency_s, bool use_odometry);
 
-  // Errors (time going backwards, too late) are returned and the message dropped.
-  Status PushScan(LaserScan scan);
-  Status PushOdometry(Utime utime, const Pose2& odom);
+  // Errors (time going backwards, too late, a clock jumped ahead of the other stream's) are
+  // returned and the message dropped. `arrival` [us]: the message's receive time (log time in
+  // replay), for StreamMerger's clock-jump check; kNoArrival skips it.
+  static constexpr Utime kNoArrival = StreamMerger<int>::kNoArrival;
+  Status PushScan(LaserScan scan, Utime arrival = kNoArrival);
+  Status PushOdometry(Utime utime, const Pose2& odom, Utime arrival = kNoArrival);
   // Hands on every scan that is ready; with flush, every scan still waiting too. Odometry the
   // buffer refuses is reported through `warn`.
   void Process(bool flush, const OnScan& on_scan,
