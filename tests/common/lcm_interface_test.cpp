@@ -58,6 +58,43 @@ TEST(LcmInterface, MalformedMessageIsCountedNotDelivered) {
   EXPECT_EQ(lcm->decode_errors(), 2);
 }
 
+// A repeated message (the same bytes) is dropped and counted; a second subscription to the
+// channel still gets its own copy, and an older message identical to none of the recent ones
+// passes.
+TEST(LcmInterface, DuplicateMessagesAreCountedNotDelivered) {
+  auto lcm = MakeLcm("memq://");
+  std::vector<int64_t> got, also;
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER",
+      [&](const bot_core::planar_lidar_t& m, const std::string&) { got.push_back(m.utime); });
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER",
+      [&](const bot_core::planar_lidar_t& m, const std::string&) { also.push_back(m.utime); });
+  lcm->Publish("LASER", MakeScan(100, 10));
+  lcm->Publish("LASER", MakeScan(100, 10));  // duplicate
+  lcm->Publish("LASER", MakeScan(101, 10));
+  lcm->Publish("LASER", MakeScan(100, 10));  // a late duplicate
+  lcm->Publish("LASER", MakeScan(100, 11));  // same stamp, other content: not a duplicate
+  lcm->Publish("OTHER", MakeScan(100, 10));  // another channel: not a duplicate
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  EXPECT_EQ(got, (std::vector<int64_t>{100, 101, 100}));
+  EXPECT_EQ(also, got);
+  EXPECT_EQ(lcm->duplicates_dropped(), 4);  // two per subscription
+
+  RecentMessages recent;
+  const uint8_t a[3] = {1, 2, 3};
+  EXPECT_FALSE(recent.SeenBefore("X", a, 3));
+  EXPECT_TRUE(recent.SeenBefore("X", a, 3));
+  EXPECT_FALSE(recent.SeenBefore("Y", a, 3));
+  // After kKept other messages the first one is forgotten.
+  for (uint8_t i = 10; i < 10 + RecentMessages::kKept; ++i) {
+    const uint8_t b[3] = {i, i, i};
+    EXPECT_FALSE(recent.SeenBefore("X", b, 3));
+  }
+  EXPECT_FALSE(recent.SeenBefore("X", a, 3));
+}
+
 TEST(LcmInterface, RegexSubscription) {
   auto lcm = MakeLcm("memq://");
   int n = 0;

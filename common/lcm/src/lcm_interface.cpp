@@ -5,14 +5,34 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <functional>
 #include <lcm/lcm-cpp.hpp>
 #include <queue>
 #include <regex>
+#include <string_view>
 #include <stdexcept>
 
 #include "fusionloc/common/program.hpp"
 
 namespace fl {
+
+bool RecentMessages::SeenBefore(const std::string& channel, const void* data, int size) {
+  if (size <= 0) return false;
+  const uint64_t digest =
+      std::hash<std::string_view>()(std::string_view(static_cast<const char*>(data),
+                                                     static_cast<size_t>(size))) ^
+      (static_cast<uint64_t>(size) * 0x9E3779B97F4A7C15ULL);
+  std::vector<uint64_t>& ring = digests_[channel];
+  if (std::find(ring.begin(), ring.end(), digest) != ring.end()) return true;
+  size_t& next = next_[channel];
+  if (ring.size() < kKept) {
+    ring.push_back(digest);
+  } else {
+    ring[next] = digest;
+  }
+  next = (next + 1) % kKept;
+  return false;
+}
 namespace {
 
 constexpr uint32_t kLogSyncWord = 0xEDA1DA01u;

@@ -11,7 +11,9 @@
 //
 // Typed subscriptions decode each message; a message that fails to decode (wrong type,
 // truncated) is counted, reported with a rate-limited warning naming the channel and type,
-// and never reaches the handler.
+// and never reaches the handler. A message byte-for-byte identical to one of the last few of
+// its channel (a duplicate from the network or a relay: real messages carry their own time
+// stamps, so two of them never match) is counted and dropped the same way.
 #pragma once
 
 #include <cstdint>
@@ -30,6 +32,18 @@ namespace fl {
 // Default live URL: loopback-only multicast (ttl=0) with a receive buffer large enough for
 // full-resolution stereo pairs.
 constexpr const char* kDefaultLcmUrl = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216";
+
+// Digests (size and hash of the bytes) of the last kKept messages per channel, for one
+// subscription: SeenBefore() says whether a message repeats one of them (and records it).
+class RecentMessages {
+ public:
+  static constexpr size_t kKept = 16;
+  bool SeenBefore(const std::string& channel, const void* data, int size);
+
+ private:
+  std::map<std::string, std::vector<uint64_t>> digests_;  // ring per channel
+  std::map<std::string, size_t> next_;
+};
 
 class LcmInterface {
  public:
@@ -74,6 +88,7 @@ class LcmInterface {
   int64_t messages_published() const { return published_; }
   int64_t messages_received() const { return received_; }
   int64_t decode_errors() const { return decode_warning_.count(); }
+  int64_t duplicates_dropped() const { return duplicate_warning_.count(); }
 
   // Encodes and publishes an lcm-gen message. `utime` (the time stamp written to logs)
   // defaults to Now().
@@ -89,8 +104,15 @@ class LcmInterface {
   template <class Msg>
   void Subscribe(const std::string& channel_regex,
                  std::function<void(const Msg& msg, const std::string& channel)> handler) {
-    SubscribeRaw(channel_regex, [this, handler](const std::string& channel, const void* data,
-                                                int size, Utime) {
+    auto recent = std::make_shared<RecentMessages>();
+    SubscribeRaw(channel_regex, [this, handler, recent](const std::string& channel,
+                                                        const void* data, int size, Utime) {
+      if (recent->SeenBefore(channel, data, size)) {
+        duplicate_warning_.Warn("channel '" + channel +
+                                "': a message identical to a recent one (a duplicate from the "
+                                "network or a relay) dropped");
+        return;
+      }
       Msg msg;
       if (msg.decode(data, 0, size) != size) {
         decode_warning_.Warn("channel '" + channel + "': a message of " + std::to_string(size) +
@@ -113,6 +135,7 @@ class LcmInterface {
  private:
   std::vector<uint8_t> buffer_;
   RateLimitedWarning decode_warning_;
+  RateLimitedWarning duplicate_warning_;
   int64_t published_ = 0;
   int64_t received_ = 0;
   Utime last_message_utime_ = 0;
