@@ -28,6 +28,11 @@ void StatusReporter::CountDropped(const std::string& reason) {
   message_ = reason;
 }
 
+void StatusReporter::CountIn(const std::string& channel, Utime utime) {
+  ++in_;
+  gaps_.Add(channel, utime);
+}
+
 void StatusReporter::AddItemTime(double ms) {
   item_ms_sum_ += ms;
   ++item_count_;
@@ -62,6 +67,17 @@ void StatusReporter::Tick(bool force) {
   st.cpu_ms_per_item = item_count_ > 0 && !lcm_->replaying() ? item_ms_sum_ / item_count_ : 0.0;
   item_ms_sum_ = 0.0;
   item_count_ = 0;
+  for (const auto& [channel, n] : gaps_.all_gaps()) {
+    values_["gaps_" + channel] = static_cast<double>(n);
+    values_["missing_" + channel] = static_cast<double>(gaps_.missing(channel));
+  }
+  // What the LCM interface itself refused (only when something was: most runs have none).
+  if (lcm_->duplicates_dropped() > 0) {
+    values_["lcm_duplicates_dropped"] = static_cast<double>(lcm_->duplicates_dropped());
+  }
+  if (lcm_->decode_errors() > 0) {
+    values_["lcm_decode_errors"] = static_cast<double>(lcm_->decode_errors());
+  }
   st.num_keys = static_cast<int32_t>(values_.size());
   for (const auto& kv : values_) {
     st.keys.push_back(kv.first);

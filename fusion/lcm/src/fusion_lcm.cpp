@@ -288,7 +288,7 @@ std::string FusionNode::Summary() const {
 }
 
 void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
-  status_.CountIn();
+  status_.CountIn(ch_rbpf_pose_, m.utime);
   if (!PlausibleUtime(m.utime)) {
     status_.CountDropped(ch_rbpf_pose_ + ": utime " + std::to_string(m.utime) + " out of range");
     return;
@@ -355,7 +355,7 @@ void FusionNode::OnFactor(const fusionloc::relative_pose_factor_t& m, const std:
 }
 
 void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
-  status_.CountIn();
+  status_.CountIn(ch_odometry_, m.utime);
   if (!PlausibleUtime(m.utime)) {
     status_.CountDropped(ch_odometry_ + ": utime " + std::to_string(m.utime) + " out of range");
     return;

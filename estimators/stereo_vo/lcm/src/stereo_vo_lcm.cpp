@@ -207,7 +207,7 @@ void StereoVoNode::StartOrRestart() {
 }
 
 void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
-  status_.CountIn();
+  status_.CountIn(ch_stereo_, msg.utime);
   if (!vo_) {
     status_.CountDropped("stereo frame before a valid " + ch_calib_ + " and " + ch_camera_to_base_ +
                          " (waiting for the calibration and the mounting)");

@@ -14,6 +14,7 @@
 #include <map>
 #include <string>
 
+#include "fusionloc/common/input_gaps.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 
 namespace fl {
@@ -26,6 +27,10 @@ class StatusReporter {
   StatusReporter(LcmInterface* lcm, std::string process, double period_s = 1.0);
 
   void CountIn() { ++in_; }
+  // Counts an input and watches its channel's stamps for gaps (InputGaps): the status then has
+  // gaps_<CHANNEL> (intervals of more than 1.8 periods) and missing_<CHANNEL> (messages the
+  // gaps held, estimated) for every channel counted this way.
+  void CountIn(const std::string& channel, Utime utime);
   void CountOut() { ++out_; }
   // Counts a rejected input and keeps the reason as the status message (level WARN).
   void CountDropped(const std::string& reason);
@@ -57,6 +62,7 @@ class StatusReporter {
   int level_ = 3;  // STARTING
   std::string message_ = "starting";
   std::map<std::string, double> values_;
+  InputGaps gaps_;
   Utime last_publish_ = 0;
   bool error_pending_ = false;  // the level became LEVEL_ERROR since the last report
 };
