@@ -186,6 +186,87 @@ TEST(LcmLog, TruncatedAndCorruptLogsAreReported) {
   EXPECT_NE(r.ProblemSummary().find("truncated"), std::string::npos);
 }
 
+namespace {
+std::string ReadBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+void WriteBytes(const std::string& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out << bytes;
+}
+// Writes n equal-sized LASER events and returns the size of one.
+size_t WriteScans(const std::string& path, int n) {
+  {
+    LcmLogWriter w(path);
+    for (int i = 0; i < n; ++i) w.Write("LASER", MakeScan(i, 50), i);
+  }
+  return std::filesystem::file_size(path) / static_cast<size_t>(n);
+}
+std::vector<int64_t> ReadUtimes(LcmLogReader* r) {
+  std::vector<int64_t> utimes;
+  LcmLogEvent e;
+  while (r->Next(&e)) utimes.push_back(e.utime);
+  return utimes;
+}
+}  // namespace
+
+TEST(LcmLog, DamageIsReportedWithItsByteOffset) {
+  test::TempDir dir;
+  const std::string path = dir.file("d.lcmlog");
+  const size_t event = WriteScans(path, 5);
+  std::string bytes = ReadBytes(path);
+  // Overwrite the header of event 2 (its sync word and time) with junk.
+  for (size_t i = 0; i < 12; ++i) bytes[2 * event + i] = 'X';
+  WriteBytes(path, bytes);
+  LcmLogReader r(path);
+  EXPECT_EQ(ReadUtimes(&r), (std::vector<int64_t>{0, 1, 3, 4}));
+  ASSERT_EQ(r.damage().size(), 1u);
+  EXPECT_EQ(r.damage()[0].offset, static_cast<int64_t>(2 * event));
+  EXPECT_EQ(r.damage()[0].bytes, static_cast<int64_t>(event));
+  EXPECT_FALSE(r.truncated());
+  EXPECT_NE(r.ProblemSummary().find("byte offset " + std::to_string(2 * event)),
+            std::string::npos)
+      << r.ProblemSummary();
+}
+
+TEST(LcmLog, DamagedLengthDoesNotSwallowTheFollowingEvents) {
+  test::TempDir dir;
+  const std::string path = dir.file("l.lcmlog");
+  const size_t event = WriteScans(path, 5);
+  std::string bytes = ReadBytes(path);
+  // Event 1 claims three events' worth of data (its data length field, bytes 24..27).
+  const uint32_t claimed = static_cast<uint32_t>(3 * event);
+  for (int k = 0; k < 4; ++k) {
+    bytes[event + 24 + static_cast<size_t>(k)] = static_cast<char>((claimed >> (24 - 8 * k)) & 0xff);
+  }
+  WriteBytes(path, bytes);
+  LcmLogReader r(path);
+  EXPECT_EQ(ReadUtimes(&r), (std::vector<int64_t>{0, 2, 3, 4}));
+  ASSERT_EQ(r.damage().size(), 1u);
+  EXPECT_EQ(r.damage()[0].offset, static_cast<int64_t>(event));
+}
+
+TEST(LcmLog, TruncationIsReportedWhereTheLastEventStarts) {
+  test::TempDir dir;
+  const std::string path = dir.file("t.lcmlog");
+  const size_t event = WriteScans(path, 4);
+  for (const size_t cut : {size_t{3}, size_t{20}, event / 2, event - 1}) {
+    const std::string whole = ReadBytes(path);
+    const std::string cut_path = dir.file("cut.lcmlog");
+    WriteBytes(cut_path, whole.substr(0, 3 * event + cut));
+    LcmLogReader r(cut_path);
+    EXPECT_EQ(ReadUtimes(&r), (std::vector<int64_t>{0, 1, 2})) << "cut " << cut;
+    EXPECT_TRUE(r.truncated()) << "cut " << cut;
+    EXPECT_EQ(r.truncated_at(), static_cast<int64_t>(3 * event)) << "cut " << cut;
+    EXPECT_EQ(r.corrupt_bytes_skipped(), 0) << "cut " << cut;
+    EXPECT_TRUE(r.damage().empty()) << "cut " << cut;
+    EXPECT_NE(r.ProblemSummary().find("truncated at byte offset " + std::to_string(3 * event)),
+              std::string::npos)
+        << r.ProblemSummary();
+  }
+}
+
 TEST(LcmLog, ReplayDispatchesAndWritesOutputsWithLogTime) {
   test::TempDir dir;
   const std::string in = dir.file("in.lcmlog"), out = dir.file("out.lcmlog");

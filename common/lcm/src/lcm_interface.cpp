@@ -46,6 +46,31 @@ uint32_t ReadBe32(const uint8_t* p) {
 uint64_t ReadBe64(const uint8_t* p) {
   return (uint64_t(ReadBe32(p)) << 32) | uint64_t(ReadBe32(p + 4));
 }
+// LCM channel names are printable ASCII.
+bool ValidChannelName(const std::string& channel) {
+  for (const char c : channel) {
+    if (c < 0x20 || c > 0x7e) return false;
+  }
+  return true;
+}
+
+// True if the bytes hold an event header (sync word and sane lengths), i.e. the start of a
+// real event that a damaged header's lengths have swallowed.
+bool ContainsEventHeader(const std::string& channel, const std::vector<uint8_t>& data) {
+  std::vector<uint8_t> body(channel.begin(), channel.end());
+  body.insert(body.end(), data.begin(), data.end());
+  for (size_t i = 0; i + 28 <= body.size(); ++i) {
+    if (body[i] != 0xED || ReadBe32(&body[i]) != kLogSyncWord) continue;
+    const int32_t channel_len = static_cast<int32_t>(ReadBe32(&body[i + 20]));
+    const int32_t data_len = static_cast<int32_t>(ReadBe32(&body[i + 24]));
+    if (channel_len > 0 && channel_len <= kMaxChannelLength && data_len >= 0 &&
+        data_len <= kMaxEventBytes) {
+      return true;
+    }
+  }
+  return false;
+}
+
 void WriteBe32(uint32_t v, uint8_t* p) {
   p[0] = uint8_t(v >> 24);
   p[1] = uint8_t(v >> 16);
@@ -332,15 +357,28 @@ bool LcmLogReader::Next(LcmLogEvent* event) {
   while (true) {
     const long start = std::ftell(f);
     const size_t got = std::fread(header, 1, sizeof(header), f);
-    if (got == 0) return false;
-    if (got < sizeof(header)) {
-      truncated_ = true;
+    if (got == 0) {
+      EndAtFileEnd(start);
       return false;
     }
-    if (ReadBe32(header) != kLogSyncWord) {
-      // Resynchronise: step one byte forward and look again.
+    const bool synced = got >= 4 && ReadBe32(header) == kLogSyncWord;
+    if (got < sizeof(header) && (synced || damage_start_ < 0)) {
+      // The last header is cut short (a killed logger, a full disk).
+      EndAtFileEnd(start);
+      if (!truncated_) {
+        truncated_ = true;
+        truncated_at_ = start;
+      }
+      std::fseek(f, 0, SEEK_END);
+      return false;
+    }
+    auto skip_byte = [&] {  // resynchronise: step one byte forward and look again
       ++corrupt_bytes_;
+      if (damage_start_ < 0) damage_start_ = start;
       std::fseek(f, start + 1, SEEK_SET);
+    };
+    if (!synced || got < sizeof(header)) {
+      skip_byte();
       continue;
     }
     const int64_t number = static_cast<int64_t>(ReadBe64(header + 4));
@@ -349,14 +387,16 @@ bool LcmLogReader::Next(LcmLogEvent* event) {
     const int32_t data_len = static_cast<int32_t>(ReadBe32(header + 24));
     if (channel_len <= 0 || channel_len > kMaxChannelLength || data_len < 0 ||
         data_len > kMaxEventBytes) {
-      ++corrupt_bytes_;
-      std::fseek(f, start + 1, SEEK_SET);
+      skip_byte();
       continue;
     }
-    if (start + 28 + int64_t(channel_len) + data_len > file_size_) {
-      truncated_ = true;
-      std::fseek(f, 0, SEEK_END);
-      return false;
+    const int64_t event_end = start + 28 + int64_t(channel_len) + data_len;
+    if (event_end > file_size_) {
+      // Either the last event is cut short or this header's lengths are damaged; look for a
+      // valid event further on, and call it a truncation if none follows (EndAtFileEnd).
+      if (damage_start_ < 0) overrun_start_ = start;
+      skip_byte();
+      continue;
     }
     event->event_number = number;
     event->utime = utime;
@@ -365,21 +405,64 @@ bool LcmLogReader::Next(LcmLogEvent* event) {
     if (std::fread(&event->channel[0], 1, channel_len, f) != size_t(channel_len) ||
         (data_len > 0 && std::fread(event->data.data(), 1, data_len, f) != size_t(data_len))) {
       truncated_ = true;
+      truncated_at_ = start;
       return false;
     }
+    // A valid event ends where the next one starts (or at the end of the file). If it does not,
+    // either damage follows it or its lengths are damaged: in the second case the next real
+    // event starts inside what this header claims, so a sane header found there rejects it.
+    if (file_size_ - event_end >= 4) {
+      uint8_t next[4];
+      const bool next_synced = std::fread(next, 1, 4, f) == 4 && ReadBe32(next) == kLogSyncWord;
+      std::fseek(f, event_end, SEEK_SET);
+      if (!next_synced && (!ValidChannelName(event->channel) ||
+                           ContainsEventHeader(event->channel, event->data))) {
+        skip_byte();
+        continue;
+      }
+    }
+    EndDamage(start);
+    overrun_start_ = -1;
     return true;
   }
 }
 
+void LcmLogReader::EndAtFileEnd(int64_t end) {
+  if (damage_start_ >= 0 && damage_start_ == overrun_start_) {
+    // No valid event after an event that overran the file: the log is truncated there.
+    corrupt_bytes_ -= end - damage_start_;
+    truncated_ = true;
+    truncated_at_ = damage_start_;
+    damage_start_ = -1;
+    return;
+  }
+  EndDamage(end);
+}
+
+void LcmLogReader::EndDamage(int64_t end) {
+  if (damage_start_ < 0) return;
+  ++damage_count_;
+  if (damage_.size() < kMaxDamageKept) damage_.push_back(Damage{damage_start_, end - damage_start_});
+  damage_start_ = -1;
+}
+
 std::string LcmLogReader::ProblemSummary() const {
   std::string s;
-  if (corrupt_bytes_ > 0) {
+  if (damage_count_ > 0) {
     s += "LCM log '" + path_ + "': skipped " + std::to_string(corrupt_bytes_) +
-         " corrupt bytes between events";
+         " corrupt bytes in " + std::to_string(damage_count_) +
+         " damaged stretch(es) and resynchronised at the next event; damage at byte offset";
+    for (size_t i = 0; i < damage_.size() && i < 5; ++i) {
+      s += (i ? ", " : " ") + std::to_string(damage_[i].offset) + " (" +
+           std::to_string(damage_[i].bytes) + " bytes)";
+    }
+    if (damage_count_ > 5) s += ", ...";
   }
   if (truncated_) {
     if (!s.empty()) s += "; ";
-    s += "LCM log '" + path_ + "' is truncated: the last event is incomplete and was ignored";
+    s += "LCM log '" + path_ + "' is truncated at byte offset " + std::to_string(truncated_at_) +
+         " of " + std::to_string(file_size_) +
+         ": the last event is incomplete and was ignored; every event before it was read";
   }
   return s;
 }
@@ -417,6 +500,7 @@ void LcmLogWriter::Write(const std::string& channel, const void* data, int size,
   if (std::fwrite(header, 1, 28, f) != 28 ||
       std::fwrite(channel.data(), 1, channel.size(), f) != channel.size() ||
       (size > 0 && std::fwrite(data, 1, size_t(size), f) != size_t(size))) {
+    failed_ = true;
     throw std::runtime_error("write error on LCM log '" + write_path_ +
                              "': " + std::strerror(errno) + " (disk full?)");
   }
@@ -425,6 +509,7 @@ void LcmLogWriter::Write(const std::string& channel, const void* data, int size,
 
 void LcmLogWriter::Flush() {
   if (file_ && std::fflush(static_cast<FILE*>(file_)) != 0) {
+    failed_ = true;
     throw std::runtime_error("write error on LCM log '" + write_path_ +
                              "': " + std::strerror(errno) + " (disk full?)");
   }
@@ -434,12 +519,14 @@ void LcmLogWriter::Close() {
   if (!file_) return;
   FILE* f = static_cast<FILE*>(file_);
   file_ = nullptr;
-  const bool ok = std::fflush(f) == 0;
+  const bool ok = std::fflush(f) == 0 && !failed_;
   const bool closed = std::fclose(f) == 0;
   if (!ok || !closed) {
+    // A write failed (disk full): the output never gets its final name.
+    const std::string reason = failed_ ? std::string("an earlier write failed") : std::strerror(errno);
     std::remove(write_path_.c_str());
-    throw std::runtime_error("cannot finish LCM log '" + write_path_ +
-                             "': " + std::strerror(errno));
+    throw std::runtime_error("cannot finish LCM log '" + write_path_ + "': " + reason +
+                             "; the incomplete output was deleted");
   }
   if (write_path_ != path_ && std::rename(write_path_.c_str(), path_.c_str()) != 0) {
     throw std::runtime_error("cannot rename '" + write_path_ + "' to '" + path_ +

@@ -184,6 +184,11 @@ int LcmProcess::Run(const MakeNode& make_node) const {
   SpinNodes(lcm.get(), {node.get()}, &watch);
   const std::string summary = node->Summary();
   if (!summary.empty()) FL_LOG(INFO) << summary;
+  const std::string failure = node->Failure();
+  if (!failure.empty()) {
+    FL_LOG(ERROR) << failure;
+    return kExitFailure;
+  }
   if (!lcm->replaying()) return kExitOk;
   const auto counts = lcm->LogChannelCounts();
   const std::string log =

@@ -183,14 +183,29 @@ class LcmLogReader {
   LcmLogReader(const LcmLogReader&) = delete;
   LcmLogReader& operator=(const LcmLogReader&) = delete;
 
+  // One stretch of bytes that held no valid event, skipped to resynchronise.
+  struct Damage {
+    int64_t offset = 0;  // [bytes] from the start of the file
+    int64_t bytes = 0;   // [bytes] skipped
+  };
+
   // Reads the next event; false at the end of the file. Corrupt bytes are skipped up to the
-  // next sync word and counted; a truncated final event is counted and ends the log.
+  // next valid event and recorded with their byte offset; a truncated final event is recorded
+  // and ends the log. An event is valid when its header is sane and the bytes after it are the
+  // next event's sync word or the end of the file (a header whose lengths were damaged is not
+  // taken for an event that swallows its successors).
   bool Next(LcmLogEvent* event);
 
   const std::string& path() const { return path_; }
   int64_t corrupt_bytes_skipped() const { return corrupt_bytes_; }
   bool truncated() const { return truncated_; }
-  // A human-readable account of problems found so far ("" if none).
+  // [bytes] where the incomplete last event starts (-1 if the log is not truncated).
+  int64_t truncated_at() const { return truncated_at_; }
+  // The damaged stretches found so far, in file order (the first kMaxDamageKept of them).
+  const std::vector<Damage>& damage() const { return damage_; }
+  int64_t damage_count() const { return damage_count_; }
+  static constexpr size_t kMaxDamageKept = 64;
+  // A human-readable account of problems found so far, naming byte offsets ("" if none).
   std::string ProblemSummary() const;
   int64_t file_size() const { return file_size_; }
   int64_t position() const;
@@ -199,8 +214,15 @@ class LcmLogReader {
   std::string path_;
   void* file_ = nullptr;  // FILE*
   int64_t file_size_ = 0;
+  void EndDamage(int64_t end);
+  void EndAtFileEnd(int64_t end);
   int64_t corrupt_bytes_ = 0;
   bool truncated_ = false;
+  int64_t truncated_at_ = -1;
+  int64_t damage_start_ = -1;  // start of the damaged stretch being skipped (-1: none)
+  int64_t overrun_start_ = -1;  // start of a header whose event overran the end of the file
+  std::vector<Damage> damage_;
+  int64_t damage_count_ = 0;
 };
 
 class LcmLogWriter {
@@ -223,7 +245,8 @@ class LcmLogWriter {
   // Hands what was written to the kernel (it survives a kill -9 of this process, not a power
   // loss). Throws on I/O error.
   void Flush();
-  // Flushes, closes and (if atomic) renames into place. Throws on I/O error.
+  // Flushes, closes and (if atomic) renames into place. Throws on I/O error; after any failed
+  // Write() or Flush() it deletes the output instead (a log cut short never looks whole).
   void Close();
   // Closes and deletes the partial output (use on failure).
   void Abandon();
@@ -235,6 +258,7 @@ class LcmLogWriter {
   std::string write_path_;
   void* file_ = nullptr;  // FILE*
   int64_t next_event_ = 0;
+  bool failed_ = false;  // a write failed: Close() deletes instead of renaming
   std::vector<uint8_t> buffer_;
 };
 

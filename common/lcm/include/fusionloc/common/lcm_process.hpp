@@ -59,6 +59,9 @@ class LcmNode {
   virtual void Finish() {}
   // One line for the log at the end ("scans 1001, keyframes 69, ...").
   virtual std::string Summary() const { return ""; }
+  // Non-empty when the node could not do what it was asked to (e.g. save the map it was asked
+  // to save, on a full disk): the process reports it and exits non-zero after finishing.
+  virtual std::string Failure() const { return ""; }
 };
 
 using MakeNode =
