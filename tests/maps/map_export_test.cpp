@@ -5,6 +5,12 @@
 #include <pcl/point_types.h>
 #include <yaml-cpp/yaml.h>
 
+#include <sched.h>
+#include <sys/mount.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <filesystem>
 #include <fstream>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -141,6 +147,55 @@ TEST(MapsPcd, BinaryRoundTripWithPcl) {
               SavePointCloudPcd(pts, {1.0f}, dir.file("e.pcd"));
             }).find("1 intensities for 100 points"),
             std::string::npos);
+}
+
+// On a full disk the save fails with an error that says so, and leaves no file under the
+// final name nor a partial one. The disk is a 16 kB tmpfs mounted in a private mount namespace
+// of a child process (needs root, as CI runs).
+TEST(MapsPcd, FullDiskGivesAClearErrorAndNoFile) {
+  if (geteuid() != 0) GTEST_SKIP() << "needs root to mount a tmpfs in a private mount namespace";
+  fl::test::TempDir dir;
+  const std::string disk = dir.file("disk");
+  std::filesystem::create_directories(disk);
+  int pipe_fds[2];
+  ASSERT_EQ(pipe(pipe_fds), 0);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    close(pipe_fds[0]);
+    std::string report;
+    if (unshare(CLONE_NEWNS) != 0 || mount("none", "/", nullptr, MS_REC | MS_PRIVATE, nullptr) != 0 ||
+        mount("tmpfs", disk.c_str(), "tmpfs", 0, "size=16k") != 0) {
+      report = "SETUP cannot mount a tmpfs";
+    } else {
+      std::vector<Eigen::Vector3f> pts;
+      for (int i = 0; i < 20000; ++i) pts.emplace_back(0.01f * i, 0.0f, 1.0f);
+      try {
+        report = ErrorOf([&] { SavePointCloudPcd(pts, {}, disk + "/map.pcd"); });
+      } catch (const std::exception& e) {
+        report = std::string("not a MapExportError: ") + e.what();
+      }
+      for (const auto& e : std::filesystem::directory_iterator(disk)) {
+        report += "\nLEFT " + e.path().filename().string();
+      }
+    }
+    const ssize_t written = write(pipe_fds[1], report.data(), report.size());
+    _exit(written == static_cast<ssize_t>(report.size()) ? 0 : 1);
+  }
+  close(pipe_fds[1]);
+  std::string report;
+  char buf[512];
+  for (ssize_t n; (n = read(pipe_fds[0], buf, sizeof(buf))) > 0;) report.append(buf, static_cast<size_t>(n));
+  close(pipe_fds[0]);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
+      << "the saving child ended with wait status " << status << " (signal "
+      << (WIFSIGNALED(status) ? WTERMSIG(status) : 0) << "): " << report;
+  if (report.rfind("SETUP", 0) == 0) GTEST_SKIP() << report;
+  EXPECT_NE(report.find("map.pcd"), std::string::npos) << report;
+  EXPECT_NE(report.find("disk full"), std::string::npos) << report;
+  EXPECT_EQ(report.find("LEFT"), std::string::npos) << report;
 }
 
 TEST(MapsTopView, SizeAndContent) {

@@ -127,6 +127,7 @@ ReplayReport RunReplay(const ReplayOptions& options,
     }
     if (s.missing.empty()) any_stage_ran = true;
     s.summary = n->Summary();
+    s.failure = n->Failure();
     report.stages.push_back(std::move(s));
   }
   // What went to out_path: every published message and the delivered inputs.

@@ -32,6 +32,7 @@ struct StageReport {
   std::string program;               // fl-rbpf-slam, fl-stereo-vo, fl-fusion
   std::vector<std::string> missing;  // required inputs that never arrived
   std::string summary;               // the node's closing line
+  std::string failure;               // what it could not do ("" = nothing); exit non-zero
 };
 
 struct ReplayReport {

@@ -149,6 +149,13 @@ int main(int argc, char** argv) {
     if (!options.out_path.empty()) {
       FL_LOG(INFO) << "wrote " << options.out_path << " (" << r.events_out << " events)";
     }
+    bool failed = false;
+    for (const auto& st : r.stages) {
+      if (st.failure.empty()) continue;
+      FL_LOG(ERROR) << st.program << ": " << st.failure;
+      failed = true;
+    }
+    if (failed) return fl::kExitFailure;
     if (fl::ShutdownRequested()) {
       FL_LOG(WARN) << "interrupted: the output holds what was replayed until then";
       return fl::kExitFailure;

@@ -466,8 +466,10 @@ void FusionNode::SaveMap() {
     maps::SavePointCloudTopView(points, out + "_top.png", config_.map_png_resolution_m);
     FL_LOG(INFO) << "saved " << points.size() << " map points to " << out << ".pcd and " << out
                  << "_top.png";
+    map_save_failure_.clear();
   } catch (const std::exception& e) {
-    FL_LOG(ERROR) << "could not save the 3D map to " << out << ".*: " << e.what();
+    map_save_failure_ = "could not save the 3D map to " + out + ".*: " + e.what();
+    FL_LOG(ERROR) << map_save_failure_;
   }
 }
 

@@ -4,6 +4,7 @@
 #include <pcl/point_types.h>
 
 #include <cstdio>
+#include <filesystem>
 
 #include "fusionloc/common/log.hpp"
 #include "fusionloc/maps/map_export.hpp"
@@ -11,15 +12,38 @@
 namespace fl::maps {
 namespace {
 
+// Why a write of about `needed` bytes to `path` may have failed.
+std::string WriteFailureReason(const std::string& path, uintmax_t needed) {
+  std::filesystem::path folder = std::filesystem::path(path).parent_path();
+  if (folder.empty()) folder = ".";
+  std::error_code ec;
+  const std::filesystem::space_info space = std::filesystem::space(folder, ec);
+  if (!ec && space.available < needed) {
+    return "only " + std::to_string(space.available / 1024) + " kB free on its file system, " +
+           "about " + std::to_string(needed / 1024 + 1) + " kB needed (disk full)";
+  }
+  return "does the folder exist and is it writable?";
+}
+
 template <class Cloud>
 void WriteBinary(const Cloud& cloud, const std::string& path) {
   // PCL picks nothing from the extension, so a temporary name is safe.
   const std::string tmp = path + ".partial";
   pcl::PCDWriter writer;
-  if (writer.writeBinary(tmp, cloud) != 0) {
+  std::string pcl_error;
+  int rc = -1;
+  try {
+    rc = writer.writeBinary(tmp, cloud);
+  } catch (const std::exception& e) {  // PCL throws pcl::IOException on a failed allocation
+    std::string what = e.what();
+    if (what.rfind(": ", 0) == 0) what = what.substr(2);
+    pcl_error = " (PCL: " + what + ")";
+  }
+  if (rc != 0) {
     std::remove(tmp.c_str());
-    throw MapExportError("PCL could not write '" + path +
-                         "' (does the folder exist and is it writable?)");
+    const uintmax_t needed = cloud.size() * sizeof(typename Cloud::PointType) + 1024;
+    throw MapExportError("PCL could not write '" + path + "': " +
+                         WriteFailureReason(path, needed) + pcl_error);
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     std::remove(tmp.c_str());

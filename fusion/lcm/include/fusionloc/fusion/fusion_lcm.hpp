@@ -70,6 +70,8 @@ class FusionNode : public LcmNode {
   void Poll() override;
   void Finish() override;
   std::string Summary() const override;
+  // The last map save's error ("" if it succeeded or none was asked for).
+  std::string Failure() const override { return map_save_failure_; }
 
  private:
   void OnLaserPose(const bot_core::pose_t& m);
@@ -96,6 +98,7 @@ class FusionNode : public LcmNode {
   LcmInterface* lcm_;
   bool async_;
   bool with_time_;  // wall-clock times in what is published (live only)
+  std::string map_save_failure_;
   std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_camera_to_base_, ch_pose_, ch_trajectory_,
       ch_map_;
   FactorGraphFusion fusion_;
