@@ -58,18 +58,24 @@ TEST(LcmInterface, MalformedMessageIsCountedNotDelivered) {
   EXPECT_EQ(lcm->decode_errors(), 2);
 }
 
-// A repeated message (the same bytes) is dropped and counted; a second subscription to the
-// channel still gets its own copy, and an older message identical to none of the recent ones
-// passes.
+// On a data-stream subscription (Duplicates::kDrop) a repeated message (the same bytes) is
+// dropped and counted; a second such subscription to the channel still gets its own copy, and
+// an older message identical to none of the recent ones passes. A default subscription (commands,
+// orders) gets every message.
 TEST(LcmInterface, DuplicateMessagesAreCountedNotDelivered) {
   auto lcm = MakeLcm("memq://");
-  std::vector<int64_t> got, also;
+  std::vector<int64_t> got, also, every;
   lcm->Subscribe<bot_core::planar_lidar_t>(
       "LASER",
-      [&](const bot_core::planar_lidar_t& m, const std::string&) { got.push_back(m.utime); });
+      [&](const bot_core::planar_lidar_t& m, const std::string&) { got.push_back(m.utime); },
+      LcmInterface::Duplicates::kDrop);
   lcm->Subscribe<bot_core::planar_lidar_t>(
       "LASER",
-      [&](const bot_core::planar_lidar_t& m, const std::string&) { also.push_back(m.utime); });
+      [&](const bot_core::planar_lidar_t& m, const std::string&) { also.push_back(m.utime); },
+      LcmInterface::Duplicates::kDrop);
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER",
+      [&](const bot_core::planar_lidar_t& m, const std::string&) { every.push_back(m.utime); });
   lcm->Publish("LASER", MakeScan(100, 10));
   lcm->Publish("LASER", MakeScan(100, 10));  // duplicate
   lcm->Publish("LASER", MakeScan(101, 10));
@@ -80,7 +86,8 @@ TEST(LcmInterface, DuplicateMessagesAreCountedNotDelivered) {
   }
   EXPECT_EQ(got, (std::vector<int64_t>{100, 101, 100}));
   EXPECT_EQ(also, got);
-  EXPECT_EQ(lcm->duplicates_dropped(), 4);  // two per subscription
+  EXPECT_EQ(every, (std::vector<int64_t>{100, 100, 101, 100, 100}));
+  EXPECT_EQ(lcm->duplicates_dropped(), 4);  // two per dropping subscription
 
   RecentMessages recent;
   const uint8_t a[3] = {1, 2, 3};

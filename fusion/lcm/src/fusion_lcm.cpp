@@ -145,15 +145,22 @@ void FusionNode::Handle(const std::string& channel, std::function<void(const Msg
     handler(msg);
     return true;
   };
-  lcm_->Subscribe<Msg>(channel, [this, handler](const Msg& m, const std::string& ch) {
-    handler(m);
-    if (journal_writer_) {
-      const int size = m.getEncodedSize();
-      encode_buffer_.resize(static_cast<size_t>(size));
-      m.encode(encode_buffer_.data(), 0, size);
-      Record(ch, encode_buffer_.data(), size);
-    }
-  });
+  // Estimates and odometry carry their own stamps: a byte-identical repeat is a duplicate.
+  const auto duplicates = std::is_same_v<Msg, bot_core::rigid_transform_t>
+                              ? LcmInterface::Duplicates::kDeliver
+                              : LcmInterface::Duplicates::kDrop;
+  lcm_->Subscribe<Msg>(
+      channel,
+      [this, handler](const Msg& m, const std::string& ch) {
+        handler(m);
+        if (journal_writer_) {
+          const int size = m.getEncodedSize();
+          encode_buffer_.resize(static_cast<size_t>(size));
+          m.encode(encode_buffer_.data(), 0, size);
+          Record(ch, encode_buffer_.data(), size);
+        }
+      },
+      duplicates);
 }
 
 void FusionNode::RestoreFromJournal() {

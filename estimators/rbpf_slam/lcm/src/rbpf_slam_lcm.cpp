@@ -224,7 +224,8 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
         OnLaserToBase(T);
       });
   lcm_->Subscribe<bot_core::planar_lidar_t>(
-      ch_laser_, [this](const bot_core::planar_lidar_t& m, const std::string&) { OnLaser(m); });
+      ch_laser_, [this](const bot_core::planar_lidar_t& m, const std::string&) { OnLaser(m); },
+      LcmInterface::Duplicates::kDrop);
   if (!node_options_.no_odometry) {
     lcm_->Subscribe<fusionloc::wheel_odometry_t>(
         ch_odometry_, [this](const fusionloc::wheel_odometry_t& m, const std::string&) {
@@ -242,7 +243,8 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
             status_.CountDropped(st.message());
             warn_.Warn(st.message());
           }
-        });
+        },
+        LcmInterface::Duplicates::kDrop);
   }
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_laser_);
 }

@@ -166,7 +166,8 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
       ch_camera_to_base_,
       [this](const bot_core::rigid_transform_t& m, const std::string&) { OnCameraToBase(m); });
   lcm_->Subscribe<bot_core::images_t>(
-      ch_stereo_, [this](const bot_core::images_t& m, const std::string&) { OnStereo(m); });
+      ch_stereo_, [this](const bot_core::images_t& m, const std::string&) { OnStereo(m); },
+      LcmInterface::Duplicates::kDrop);
 }
 
 StereoVoNode::~StereoVoNode() = default;

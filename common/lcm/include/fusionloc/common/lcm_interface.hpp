@@ -11,9 +11,11 @@
 //
 // Typed subscriptions decode each message; a message that fails to decode (wrong type,
 // truncated) is counted, reported with a rate-limited warning naming the channel and type,
-// and never reaches the handler. A message byte-for-byte identical to one of the last few of
-// its channel (a duplicate from the network or a relay: real messages carry their own time
-// stamps, so two of them never match) is counted and dropped the same way.
+// and never reaches the handler. A subscription to a data stream (Duplicates::kDrop) also drops
+// a message byte-for-byte identical to one of the last few of its channel (a duplicate from
+// the network or a relay: sensor data and estimates carry their own time stamps, so two real
+// ones never match), counted the same way. Commands and orders keep the default (kDeliver): a
+// repeated command is meant, and a replayed order must reach the code that refuses and logs it.
 #pragma once
 
 #include <cstdint>
@@ -101,13 +103,15 @@ class LcmInterface {
   }
 
   // Decodes messages of type Msg on `channel_regex` and calls `handler(msg, channel)`.
+  enum class Duplicates { kDeliver, kDrop };
   template <class Msg>
   void Subscribe(const std::string& channel_regex,
-                 std::function<void(const Msg& msg, const std::string& channel)> handler) {
-    auto recent = std::make_shared<RecentMessages>();
+                 std::function<void(const Msg& msg, const std::string& channel)> handler,
+                 Duplicates duplicates = Duplicates::kDeliver) {
+    auto recent = duplicates == Duplicates::kDrop ? std::make_shared<RecentMessages>() : nullptr;
     SubscribeRaw(channel_regex, [this, handler, recent](const std::string& channel,
                                                         const void* data, int size, Utime) {
-      if (recent->SeenBefore(channel, data, size)) {
+      if (recent && recent->SeenBefore(channel, data, size)) {
         duplicate_warning_.Warn("channel '" + channel +
                                 "': a message identical to a recent one (a duplicate from the "
                                 "network or a relay) dropped");
