@@ -461,11 +461,12 @@ void LcmLogWriter::Close() {
   if (std::fclose(f) != 0 && reason.empty()) reason = std::strerror(errno);
   if (!reason.empty()) {
     close_failed_ = true;
-    throw std::runtime_error(
-        "cannot finish LCM log '" + write_path_ + "': " + reason +
-        (write_path_ != path_ ? "; it holds the events written before the error and was not "
-                                "renamed to '" + path_ + "'"
-                              : ""));
+    std::string message = "cannot finish LCM log '" + write_path_ + "': " + reason;
+    if (write_path_ != path_) {
+      message += "; it holds the events written before the error and was not renamed to '" +
+                 path_ + "'";
+    }
+    throw std::runtime_error(message);
   }
   if (write_path_ != path_ && std::rename(write_path_.c_str(), path_.c_str()) != 0) {
     const int err = errno;
