@@ -463,8 +463,8 @@ void LcmLogWriter::Close() {
     close_failed_ = true;
     std::string message = "cannot finish LCM log '" + write_path_ + "': " + reason;
     if (write_path_ != path_) {
-      message += "; it holds the events written before the error and was not renamed to '" +
-                 path_ + "'";
+      message +=
+          "; it holds the events written before the error and was not renamed to '" + path_ + "'";
     }
     throw std::runtime_error(message);
   }
