@@ -138,7 +138,9 @@ void Logger::Progress(Clock::time_point now) {
 LoggerReport Logger::Run(const std::function<bool()>& stop) {
   LoggerReport report;
   const auto flush_interval = std::chrono::milliseconds(options_.flush_interval_ms);
-  const int timeout_ms = std::clamp(options_.flush_interval_ms, 1, 100);
+  // How long LCM may wait for a message: short enough to flush on time and to see stop().
+  const int timeout_ms =
+      options_.flush_interval_ms > 0 ? std::clamp(options_.flush_interval_ms, 10, 100) : 100;
   Clock::time_point last_flush = Clock::now();
   Clock::time_point failing_since{};
   bool failing = false;
