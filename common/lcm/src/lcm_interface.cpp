@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <filesystem>
 #include <functional>
 #include <lcm/lcm-cpp.hpp>
 #include <queue>
@@ -488,30 +489,46 @@ LcmLogWriter::~LcmLogWriter() {
   }
 }
 
+namespace {
+std::string WriteError(const std::string& path, const std::string& reason) {
+  return "write error on LCM log '" + path + "': " + reason + " (disk full?)";
+}
+constexpr const char* kEarlierError = "an earlier write to it failed";
+// Deletes `path` if it is a regular file: a writer pointed at a device (/dev/full) leaves it.
+void RemoveRegularFile(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_regular_file(std::filesystem::symlink_status(path, ec))) {
+    std::filesystem::remove(path, ec);
+  }
+}
+}  // namespace
+
 void LcmLogWriter::Write(const std::string& channel, const void* data, int size, Utime utime) {
   if (!file_) throw std::runtime_error("LCM log '" + path_ + "' written after Close()");
+  FILE* f = static_cast<FILE*>(file_);
+  if (std::ferror(f)) throw std::runtime_error(WriteError(write_path_, kEarlierError));
   uint8_t header[28];
   WriteBe32(kLogSyncWord, header);
   WriteBe64(static_cast<uint64_t>(next_event_), header + 4);
   WriteBe64(static_cast<uint64_t>(utime), header + 12);
   WriteBe32(static_cast<uint32_t>(channel.size()), header + 20);
   WriteBe32(static_cast<uint32_t>(size), header + 24);
-  FILE* f = static_cast<FILE*>(file_);
   if (std::fwrite(header, 1, 28, f) != 28 ||
       std::fwrite(channel.data(), 1, channel.size(), f) != channel.size() ||
       (size > 0 && std::fwrite(data, 1, size_t(size), f) != size_t(size))) {
-    failed_ = true;
-    throw std::runtime_error("write error on LCM log '" + write_path_ +
-                             "': " + std::strerror(errno) + " (disk full?)");
+    const int err = errno;
+    throw std::runtime_error(WriteError(write_path_, std::strerror(err)));
   }
   ++next_event_;
 }
 
 void LcmLogWriter::Flush() {
-  if (file_ && std::fflush(static_cast<FILE*>(file_)) != 0) {
-    failed_ = true;
-    throw std::runtime_error("write error on LCM log '" + write_path_ +
-                             "': " + std::strerror(errno) + " (disk full?)");
+  if (!file_) return;
+  FILE* f = static_cast<FILE*>(file_);
+  if (std::ferror(f)) throw std::runtime_error(WriteError(write_path_, kEarlierError));
+  if (std::fflush(f) != 0) {
+    const int err = errno;
+    throw std::runtime_error(WriteError(write_path_, std::strerror(err)));
   }
 }
 
@@ -519,26 +536,38 @@ void LcmLogWriter::Close() {
   if (!file_) return;
   FILE* f = static_cast<FILE*>(file_);
   file_ = nullptr;
-  const bool ok = std::fflush(f) == 0 && !failed_;
-  const bool closed = std::fclose(f) == 0;
-  if (!ok || !closed) {
-    // A write failed (disk full): the output never gets its final name.
-    const std::string reason = failed_ ? std::string("an earlier write failed") : std::strerror(errno);
-    std::remove(write_path_.c_str());
-    throw std::runtime_error("cannot finish LCM log '" + write_path_ + "': " + reason +
-                             "; the incomplete output was deleted");
+  // A failed write leaves the stream's error flag set (and stdio drops the bytes it could
+  // not write, so a later flush succeeds): checked so that such a log is never passed off
+  // as whole.
+  std::string reason = std::ferror(f) ? kEarlierError : "";
+  if (std::fflush(f) != 0 && reason.empty()) reason = std::strerror(errno);
+  if (std::fclose(f) != 0 && reason.empty()) reason = std::strerror(errno);
+  if (!reason.empty()) {
+    close_failed_ = true;
+    std::string message = "cannot finish LCM log '" + write_path_ + "': " + reason;
+    if (write_path_ != path_) {
+      message +=
+          "; it holds the events written before the error and was not renamed to '" + path_ + "'";
+    }
+    throw std::runtime_error(message);
   }
   if (write_path_ != path_ && std::rename(write_path_.c_str(), path_.c_str()) != 0) {
+    const int err = errno;
+    close_failed_ = true;
     throw std::runtime_error("cannot rename '" + write_path_ + "' to '" + path_ +
-                             "': " + std::strerror(errno));
+                             "': " + std::strerror(err));
   }
 }
 
 void LcmLogWriter::Abandon() {
-  if (!file_) return;
-  std::fclose(static_cast<FILE*>(file_));
-  file_ = nullptr;
-  std::remove(write_path_.c_str());
+  if (file_) {
+    std::fclose(static_cast<FILE*>(file_));
+    file_ = nullptr;
+    RemoveRegularFile(write_path_);
+  } else if (close_failed_) {
+    RemoveRegularFile(write_path_);
+  }
+  close_failed_ = false;
 }
 
 }  // namespace fl

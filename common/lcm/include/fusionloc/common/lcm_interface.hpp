@@ -238,6 +238,8 @@ class LcmLogWriter {
   LcmLogWriter(const LcmLogWriter&) = delete;
   LcmLogWriter& operator=(const LcmLogWriter&) = delete;
 
+  // Throws on an I/O error (a short write: ENOSPC, EIO, EFBIG), naming the file and the
+  // reason. After one, every Write, Flush and Close throws: a log never goes on past a hole.
   void Write(const std::string& channel, const void* data, int size, Utime utime);
   template <class Msg>
   void Write(const std::string& channel, const Msg& msg, Utime utime) {
@@ -249,10 +251,12 @@ class LcmLogWriter {
   // Hands what was written to the kernel (it survives a kill -9 of this process, not a power
   // loss). Throws on I/O error.
   void Flush();
-  // Flushes, closes and (if atomic) renames into place. Throws on I/O error; after any failed
-  // Write() or Flush() it deletes the output instead (a log cut short never looks whole).
+  // Flushes, closes and (if atomic) renames into place. Throws on an I/O error, now or in an
+  // earlier Write or Flush: then nothing is renamed and nothing deleted ("path.partial", or
+  // the file itself if not atomic, keeps the events written before the error).
   void Close();
-  // Closes and deletes the partial output (use on failure).
+  // Closes and deletes the partial output (use on failure; also after a Close that threw).
+  // Deletes a regular file only, never a device the writer was pointed at.
   void Abandon();
   int64_t events_written() const { return next_event_; }
   const std::string& path() const { return path_; }
@@ -262,7 +266,7 @@ class LcmLogWriter {
   std::string write_path_;
   void* file_ = nullptr;  // FILE*
   int64_t next_event_ = 0;
-  bool failed_ = false;  // a write failed: Close() deletes instead of renaming
+  bool close_failed_ = false;  // Close threw: write_path_ is still there for Abandon
   std::vector<uint8_t> buffer_;
 };
 
