@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/common/solver_threads.hpp"
 #include "fusionloc/fusion/cost_functions.hpp"
 
@@ -72,6 +73,9 @@ const char* FactorSourceName(FactorSource source) {
 Status FusionOptions::Validate() const {
   if (!(attach_tolerance_s > 0.0 && attach_tolerance_s < 10.0)) {
     return Status::Error("attach_tolerance_s must be in (0, 10) s (about half a laser period)");
+  }
+  if (!(attach_max_gap_s >= 0.0 && attach_max_gap_s < 10.0)) {
+    return Status::Error("attach_max_gap_s must be in [0, 10) s (0: no attachment across gaps)");
   }
   if (window_size < 2) return Status::Error("window_size must be >= 2 nodes");
   if (max_window_nodes < window_size) {
@@ -306,7 +310,10 @@ bool FactorGraphFusion::Attach(Utime t, int* node, Pose2* T_node_t) const {
   const Node& na = nodes_[a];
   const Node& nb = nodes_[b];
   const int n = (t - na.utime <= nb.utime - t) ? a : b;
-  if (std::llabs(t - nodes_[n].utime) > tol) return false;
+  if (std::llabs(t - nodes_[n].utime) > tol &&
+      nb.utime - na.utime > SecondsToUtime(options_.attach_max_gap_s)) {
+    return false;
+  }
   const double alpha = static_cast<double>(t - na.utime) / static_cast<double>(nb.utime - na.utime);
   const Pose2 T_map_t = Interpolate(na.T_map_base_rbpf, nb.T_map_base_rbpf, alpha);
   *node = n;
@@ -321,14 +328,16 @@ Status FactorGraphFusion::AttachFactor(const RelativePoseFactor& f, const Pose2&
   int ni = -1, nj = -1;
   Pose2 T_ni_ti, T_nj_tj;
   if (!Attach(f.utime_i, &ni, &T_ni_ti)) {
-    return Reject(&counters_.rejected_no_node, what + ": no laser node within " +
-                                                   std::to_string(options_.attach_tolerance_s) +
-                                                   " s of " + TimeText(f.utime_i) + "; dropped");
+    return Reject(&counters_.rejected_no_node,
+                  what + ": no laser node within " + FormatDouble(options_.attach_tolerance_s) +
+                      " s of " + TimeText(f.utime_i) + ", nor two within " +
+                      FormatDouble(options_.attach_max_gap_s) + " s around it; dropped");
   }
   if (!Attach(f.utime_j, &nj, &T_nj_tj)) {
-    return Reject(&counters_.rejected_no_node, what + ": no laser node within " +
-                                                   std::to_string(options_.attach_tolerance_s) +
-                                                   " s of " + TimeText(f.utime_j) + "; dropped");
+    return Reject(&counters_.rejected_no_node,
+                  what + ": no laser node within " + FormatDouble(options_.attach_tolerance_s) +
+                      " s of " + TimeText(f.utime_j) + ", nor two within " +
+                      FormatDouble(options_.attach_max_gap_s) + " s around it; dropped");
   }
   if (ni == nj) {
     return Reject(&counters_.rejected_same_node,

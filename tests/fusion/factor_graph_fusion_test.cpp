@@ -160,6 +160,57 @@ TEST(FusionFactorGraph, AsynchronousVisionFactorIsPlacedByInterpolation) {
   EXPECT_GT(PositionError(truth_j, d.truth[55].T_map_base), 0.02);
 }
 
+// Laser scans lost around a keyframe time (nodes 55 and 56 missing: the nodes around 5.58 s,
+// 54 and 57, are 0.3 s apart, neither within attach_tolerance_s): the factor is attached by
+// interpolation across the gap and places the node as exactly as with every scan; a gap wider
+// than attach_max_gap_s rejects it, naming both bounds.
+TEST(FusionFactorGraph, FactorAcrossLostScansIsAttachedByInterpolation) {
+  FusionSimOptions so;
+  so.rbpf_heading_bias = 0.0;  // RBPF poses = truth
+  so.loop_closure = false;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  for (const double max_gap : {0.35, 0.25}) {
+    FusionOptions options = TestOptions();
+    options.attach_max_gap_s = max_gap;
+    FactorGraphFusion fusion(options);
+    for (size_t k = 0; k < d.rbpf.size(); ++k) {
+      if (k == 55 || k == 56) continue;  // lost
+      ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[k].utime, d.rbpf[k].T_map_base).ok());
+    }
+    const Utime t0 = so.start_utime;
+    const Pose2 truth_i = fl::test::RoundedSquarePose(so, 3.0),
+                truth_j = fl::test::RoundedSquarePose(so, 5.58);
+    RelativePoseFactor f;
+    f.utime_i = t0 + SecondsToUtime(3.0);
+    f.utime_j = t0 + SecondsToUtime(5.58);
+    f.T_i_j = truth_i.between(truth_j).ToIsometry3();
+    f.information = Eigen::Matrix<double, 6, 6>::Identity() * 1e4;
+    f.source = FactorSource::kVision;
+    const Status st = fusion.AddFactor(f);
+    if (max_gap < 0.3) {
+      EXPECT_FALSE(st.ok());
+      EXPECT_NE(st.message().find("nor two within 0.25 s"), std::string::npos) << st.message();
+      continue;
+    }
+    ASSERT_TRUE(st.ok()) << st.message();
+    RelativePoseFactor anchor;
+    anchor.utime_i = d.truth[0].utime;
+    anchor.utime_j = d.truth[30].utime;
+    anchor.T_i_j = d.truth[0].T_map_base.between(d.truth[30].T_map_base).ToIsometry3();
+    anchor.information.diagonal() << 1e8, 1e8, 0, 0, 0, 1e8;
+    ASSERT_TRUE(fusion.AddFactor(anchor).ok());
+    fusion.FullSolve();
+    const auto traj = fusion.Trajectory();
+    ASSERT_EQ(traj.size(), d.rbpf.size() - 2);
+    // Node 57 (index 55 once 55 and 56 are gone) carries the factor's end.
+    EXPECT_EQ(traj[55].utime, d.truth[57].utime);
+    // 0.12 s from the node in a corner: the constant-velocity arc leaves millimetres, against
+    // the 0.12 m the robot moves in that time.
+    EXPECT_LT(PositionError(traj[55].T_map_base, d.truth[57].T_map_base), 5e-3);
+    EXPECT_GT(PositionError(truth_j, d.truth[57].T_map_base), 0.1);
+  }
+}
+
 TEST(FusionFactorGraph, OutOfOrderAndEarlyFactorsGiveTheSameResult) {
   FusionSimOptions so;
   so.laser_sigma_xy = 0.02;

@@ -22,7 +22,8 @@
 //
 // ASYNCHRONOUS SENSORS / TIME ATTACHMENT: nodes exist at laser times (10 Hz); a factor's
 // times utime_i, utime_j (e.g. 2 Hz vision keyframes) are attached to the NEAREST node if it
-// is within attach_tolerance_s; the small time offset between the factor time t and its node
+// is within attach_tolerance_s, or, when laser scans were lost, to the nearer of the two nodes
+// around it if they are at most attach_max_gap_s apart; the time offset between the factor time t and its node
 // time n is then corrected by INTERPOLATING the RBPF poses of the two nodes around t:
 //     T_n_t = T_rbpf(n)^-1 * Interp(T_rbpf(a), T_rbpf(b), (t - a) / (b - a))
 //     Interp(A, B, s) = A * Exp(s * Log(A^-1 B))   (SE(2) constant-velocity arc)
@@ -103,6 +104,8 @@ struct RelativePoseFactor {
 
 struct FusionOptions {
   double attach_tolerance_s = 0.06;        // [s] factor time to nearest laser node (10 Hz: 0.05)
+  double attach_max_gap_s = 0.35;          // [s] or between two nodes at most this far apart
+                                           // (scans lost: interpolated across the gap)
   int window_size = 20;                    // [nodes] optimised by each Update()
   int max_window_nodes = 200;              // [nodes] largest window a late factor may extend to;
                                            // reaching further back requests a full solve
@@ -136,6 +139,7 @@ struct FusionOptions {
   template <class A>
   void Serialize(A* a) {
     a->Visit("attach_tolerance_s", &attach_tolerance_s);
+    a->Visit("attach_max_gap_s", &attach_max_gap_s);
     a->Visit("window_size", &window_size);
     a->Visit("max_window_nodes", &max_window_nodes);
     a->Visit("window_max_iterations", &window_max_iterations);
