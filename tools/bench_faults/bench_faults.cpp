@@ -24,6 +24,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iomanip>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -571,8 +572,10 @@ int main(int argc, char** argv) {
           v = reference > 0 && o.fused_ate_m >= 0 ? o.fused_ate_m / reference : -1;
       }
       std::cout << sc.name << ": crashes " << o.run.Get("crashes") << ", fused ATE "
-                << fl::FormatDouble(o.fused_ate_m) << " m, ratio "
-                << fl::FormatDouble(o.run.Get("fused_ate_ratio")) << std::endl;
+                << std::setprecision(3) << o.fused_ate_m << " m, ratio "
+                << o.run.Get("fused_ate_ratio") << ", messages lost "
+                << o.run.Get("messages_lost") << ", recovery " << o.run.Get("recovery_s")
+                << " s" << std::endl;
       report.AddRun(o.run);
       if (fl::ShutdownRequested()) return fl::kExitFailure;
     }
@@ -586,8 +589,8 @@ int main(int argc, char** argv) {
       fs.seed = s.seed;
       fs.port = s.port + 3 * static_cast<int>(scenarios.size());
       for (fl::bench::Run& run : bf::RunFileFaults(fs, wanted_files)) {
-        std::cout << run.name << ": crashes " << run.Get("crashes") << ", messages lost "
-                  << fl::FormatDouble(run.Get("messages_lost")) << std::endl;
+        std::cout << run.name << ": crashes " << run.Get("crashes") << ", exit code "
+                  << run.Get("exit_code") << std::endl;
         report.AddRun(std::move(run));
         if (fl::ShutdownRequested()) return fl::kExitFailure;
       }

@@ -310,6 +310,13 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
       Reset();
     }
   }
+  if (!restoring_) {
+    const Status jump = laser_clock_.Check(ch_rbpf_pose_, m.utime, lcm_->last_message_utime());
+    if (!jump.ok()) {
+      status_.CountDropped(jump.message());
+      return;
+    }
+  }
   const Eigen::Isometry3d T = IsometryFromArrays(m.pos, m.orientation);
   const Status s = fusion_.AddLaserPose(m.utime, Pose2::FromIsometry3(T));
   if (!s.ok()) {

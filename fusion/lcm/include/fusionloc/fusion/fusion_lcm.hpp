@@ -19,6 +19,7 @@
 
 #include "bot_core/pose_t.hpp"
 #include "bot_core/rigid_transform_t.hpp"
+#include "fusionloc/common/clock_jump_guard.hpp"
 #include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/fusion/fusion_config.hpp"
 #include "fusionloc/point_cloud_t.hpp"
@@ -99,6 +100,7 @@ class FusionNode : public LcmNode {
   bool async_;
   bool with_time_;  // wall-clock times in what is published (live only)
   std::string map_save_failure_;
+  ClockJumpGuard laser_clock_;  // RBPF_POSE stamps against their arrival
   std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_camera_to_base_, ch_pose_, ch_trajectory_,
       ch_map_;
   FactorGraphFusion fusion_;
