@@ -17,6 +17,7 @@ TEST(ClockJumpGuard, ForwardJumpIsRejectedUntilTheStampsAgreeAgain) {
     const bool jumped = k >= 50 && k < 100;
     const Utime utime = arrival - 20000 + (jumped ? 60 * kS : 0);
     const Status st = guard.Check("RBPF_POSE", utime, arrival);
+    if (st.ok()) guard.Accept(utime, arrival);
     EXPECT_EQ(st.ok(), !jumped) << "item " << k;
     if (!st.ok()) {
       EXPECT_NE(st.message().find("RBPF_POSE"), std::string::npos);
@@ -29,16 +30,25 @@ TEST(ClockJumpGuard, ForwardJumpIsRejectedUntilTheStampsAgreeAgain) {
 }
 
 // A stream that pauses (its stamps and its arrivals both advance 30 s) and one whose arrivals
-// jitter by up to half a second are accepted.
-TEST(ClockJumpGuard, PausesAndJitterAreAccepted) {
+// jitter by up to half a second are accepted; an item the consumer refused (a stamp of -1,
+// going backwards) does not become the baseline.
+TEST(ClockJumpGuard, PausesAndJitterAreAcceptedRefusedItemsChangeNothing) {
   ClockJumpGuard guard;
-  EXPECT_TRUE(guard.Check("X", 10 * kS, 100 * kS).ok());
-  EXPECT_TRUE(guard.Check("X", 40 * kS, 130 * kS).ok());
-  EXPECT_TRUE(guard.Check("X", 40 * kS + kS / 10, 130 * kS + kS / 2).ok());
-  EXPECT_TRUE(guard.Check("X", 40 * kS + kS / 5, 130 * kS + kS / 2 + 1000).ok());
+  auto take = [&](Utime utime, Utime arrival) {
+    const Status st = guard.Check("X", utime, arrival);
+    if (st.ok()) guard.Accept(utime, arrival);
+    return st.ok();
+  };
+  EXPECT_TRUE(take(10 * kS, 100 * kS));
+  EXPECT_TRUE(take(40 * kS, 130 * kS));
+  EXPECT_TRUE(take(40 * kS + kS / 10, 130 * kS + kS / 2));
+  EXPECT_TRUE(take(40 * kS + kS / 5, 130 * kS + kS / 2 + 1000));
   // A corrupted stamp a few hundred years ahead, then the stream goes on.
-  EXPECT_FALSE(guard.Check("X", 1000000000000 * kS, 131 * kS).ok());
-  EXPECT_TRUE(guard.Check("X", 41 * kS, 131 * kS).ok());
+  EXPECT_FALSE(take(1000000000000 * kS, 131 * kS));
+  EXPECT_TRUE(take(41 * kS, 131 * kS));
+  // A stamp of -1 the consumer refuses (Check alone, no Accept): the next real one passes.
+  EXPECT_TRUE(guard.Check("X", -1, 131 * kS + kS / 10).ok());
+  EXPECT_TRUE(take(41 * kS + kS / 5, 131 * kS + kS / 5));
 }
 
 }  // namespace

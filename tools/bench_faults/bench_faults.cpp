@@ -341,7 +341,6 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
   };
   fl::bench::Progress progress("bench faults " + sc.name, static_cast<int64_t>(s.duration_s));
   double next_measure = Now() + 1.0;
-  std::map<std::string, int64_t> newest_before_kill;
   while (!sim_done() && !fl::ShutdownRequested() && Now() - t0 < 3 * s.duration_s + 30) {
     spin(0.05, nullptr);
     if (!sc.kill.empty() && killed_at < 0 && Now() - t0 >= s.kill_at * s.duration_s) {
@@ -482,8 +481,10 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
     for (size_t i = 0; i < std::min<size_t>(2, b.corruptions.size()); ++i)
       n << b.corruptions[i] << "; ";
   }
-  n << "logs: " << dir;
   run.note = n.str();
+  if (run.note.size() >= 2 && run.note.compare(run.note.size() - 2, 2, "; ") == 0) {
+    run.note.resize(run.note.size() - 2);
+  }
   return out;
 }
 
@@ -595,6 +596,7 @@ int main(int argc, char** argv) {
         if (fl::ShutdownRequested()) return fl::kExitFailure;
       }
     }
+    std::cout << "each run's logs and files: " << s.out_dir << "/RUN/" << std::endl;
     fl::bench::Publish(report, common);
     return fl::kExitOk;
   });

@@ -245,29 +245,28 @@ class FileFaults {
   }
 
   bench::Run DiskFullReplayLog() {
-    const std::string dir = RunDir("disk_full_replay_log");
-    const std::string mount = dir + "/disk";
-    const int rc = ShellOnFullDisk(
-        dir, mount, "2m",
-        Quote(s_.bin + "/fl-replay") + " " + Quote(src_) + " --quiet --config-dir " +
-            Quote(s_.config_dir) + " --out " + Quote(mount + "/out.lcmlog") + " > " +
-            Quote(dir + "/replay.log") + " 2>&1");
-    return DiskFullRun("disk_full_replay_log",
-                       "fl-replay --out onto a 2 MB file system (the output log needs more)", dir,
-                       rc, "out.lcmlog");
+    return ReplayOnFullDisk("disk_full_replay_log", "2m", "--out", "out.lcmlog", "out.lcmlog",
+                            "fl-replay --out onto a 2 MB file system (the output log needs more)");
   }
 
   bench::Run DiskFullMapSave() {
-    const std::string dir = RunDir("disk_full_map_save");
+    return ReplayOnFullDisk("disk_full_map_save", "64k", "--map-out", "map", "map.pcd",
+                            "fl-replay --map-out onto a 64 kB file system (the map needs more)");
+  }
+
+  // fl-replay of the sensor log with `flag` DISK/`target` on a tmpfs of `size`; `file` is what
+  // must not be left under its final name.
+  bench::Run ReplayOnFullDisk(const std::string& name, const std::string& size,
+                              const std::string& flag, const std::string& target,
+                              const std::string& file, const std::string& what) {
+    const std::string dir = RunDir(name);
     const std::string mount = dir + "/disk";
     const int rc = ShellOnFullDisk(
-        dir, mount, "64k",
+        dir, mount, size,
         Quote(s_.bin + "/fl-replay") + " " + Quote(src_) + " --quiet --config-dir " +
-            Quote(s_.config_dir) + " --map-out " + Quote(mount + "/map") + " > " +
+            Quote(s_.config_dir) + " " + flag + " " + Quote(mount + "/" + target) + " > " +
             Quote(dir + "/replay.log") + " 2>&1");
-    return DiskFullRun("disk_full_map_save",
-                       "fl-replay --map-out onto a 64 kB file system (the map needs more)", dir,
-                       rc, "map.pcd");
+    return DiskFullRun(name, what, dir, rc, file);
   }
 
   bench::Run DiskFullLogger() {
@@ -359,8 +358,11 @@ class FileFaults {
     return Finish(run, dir);
   }
 
-  bench::Run Finish(bench::Run run, const std::string& dir) {
-    run.note += "files: " + dir;
+  // Notes end without a separator; the run's files are in `dir` (printed at the end).
+  bench::Run Finish(bench::Run run, const std::string&) {
+    while (run.note.size() >= 2 && run.note.compare(run.note.size() - 2, 2, "; ") == 0) {
+      run.note.resize(run.note.size() - 2);
+    }
     return run;
   }
 

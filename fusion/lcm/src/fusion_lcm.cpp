@@ -310,10 +310,12 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
       Reset();
     }
   }
+  const Utime arrival = lcm_->last_message_utime();
   if (!restoring_) {
-    const Status jump = laser_clock_.Check(ch_rbpf_pose_, m.utime, lcm_->last_message_utime());
+    const Status jump = laser_clock_.Check(ch_rbpf_pose_, m.utime, arrival);
     if (!jump.ok()) {
       status_.CountDropped(jump.message());
+      clock_warning_.Warn(jump.message());
       return;
     }
   }
@@ -323,6 +325,7 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     status_.CountDropped(s.message());
     return;
   }
+  if (!restoring_) laser_clock_.Accept(m.utime, arrival);
   last_utime_ = m.utime;
   if (restoring_) return;  // one full solve at the end of the journal
   const SolveSummary u = fusion_.Update();

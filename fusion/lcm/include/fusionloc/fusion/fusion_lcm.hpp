@@ -21,6 +21,7 @@
 #include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/clock_jump_guard.hpp"
 #include "fusionloc/common/lcm_process.hpp"
+#include "fusionloc/common/log.hpp"
 #include "fusionloc/fusion/fusion_config.hpp"
 #include "fusionloc/point_cloud_t.hpp"
 #include "fusionloc/relative_pose_factor_t.hpp"
@@ -101,6 +102,7 @@ class FusionNode : public LcmNode {
   bool with_time_;  // wall-clock times in what is published (live only)
   std::string map_save_failure_;
   ClockJumpGuard laser_clock_;  // RBPF_POSE stamps against their arrival
+  RateLimitedWarning clock_warning_;
   std::string ch_rbpf_pose_, ch_odometry_, ch_points_, ch_camera_to_base_, ch_pose_, ch_trajectory_,
       ch_map_;
   FactorGraphFusion fusion_;
