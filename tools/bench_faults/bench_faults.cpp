@@ -475,6 +475,9 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
   std::ostringstream n;
   n << note << crash_note.str();
   if (!a.corruptions.empty() || !b.corruptions.empty()) {
+    std::ofstream list(dir + "/corruptions.txt");
+    for (const auto& c : a.corruptions) list << c << "\n";
+    for (const auto& c : b.corruptions) list << c << "\n";
     n << "corruptions, e.g. ";
     for (size_t i = 0; i < std::min<size_t>(3, a.corruptions.size()); ++i)
       n << a.corruptions[i] << "; ";

@@ -9,7 +9,7 @@
 namespace fl::bench_faults {
 namespace {
 
-constexpr size_t kCorruptionsKept = 20;
+constexpr size_t kCorruptionsKept = 1000;  // all of a bench run (a few hundred)
 
 bool Fraction(double f) { return f >= 0.0 && f <= 1.0; }
 

@@ -61,7 +61,7 @@ struct FaultCounts {
   int64_t corrupted = 0;   // with a bad field
   std::map<std::string, int64_t> dropped_per_channel;
   std::map<std::string, int64_t> corrupted_per_channel;
-  std::vector<std::string> corruptions;  // the first ones made, for the report ("type.field = v")
+  std::vector<std::string> corruptions;  // the first 1000 made, for the report ("type.field = v")
 };
 
 class FaultInjector {
