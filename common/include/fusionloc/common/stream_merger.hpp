@@ -9,9 +9,10 @@
 //
 // An item is released when every stream has delivered something at or after its time (so no
 // earlier item can still arrive), or when it is older than `max_latency_us` behind the newest
-// item seen (a silent stream cannot stall the others). Items whose time goes backwards within
-// their stream, or that arrive after items of a later time were already released, are rejected
-// with a reason; the caller counts and reports them.
+// item seen (a silent stream cannot stall the others). An item older than the last of its own
+// stream (reordered or late by the transport) is placed by its time stamp as long as nothing
+// newer has been released; one that arrives after items of a later time were released is
+// rejected with a reason; the caller counts and reports it.
 //
 // A clock that jumps forward (a sensor's stamps suddenly a minute ahead) would otherwise
 // release everything queued and then reject every other stream as late until real time caught
@@ -22,6 +23,7 @@
 // whose peers have gone silent, is not checked (nothing to compare with).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <deque>
 #include <limits>
@@ -77,14 +79,18 @@ class StreamMerger {
         }
       }
     }
-    if (utime < s.last_utime) {
-      return Status::Error("stream '" + s.name + "': time went backwards (" + FormatUtime(utime) +
-                           " after " + FormatUtime(s.last_utime) + "); message dropped");
-    }
     if (utime < released_utime_) {
       return Status::Error("stream '" + s.name + "': message at " + FormatUtime(utime) +
                            " arrived after data up to " + FormatUtime(released_utime_) +
-                           " was processed (more than the merge latency late); dropped");
+                           " was processed (more than the merge latency late, or its clock "
+                           "went back); dropped");
+    }
+    if (utime < s.last_utime) {
+      // Reordered within the merge window: placed by its stamp.
+      auto at = std::upper_bound(s.queue.begin(), s.queue.end(), utime,
+                                 [](Utime t, const Item& item) { return t < item.utime; });
+      s.queue.insert(at, Item{utime, stream, std::move(value)});
+      return Status::Ok();
     }
     s.last_utime = utime;
     if (arrival != kNoArrival) s.last_arrival = arrival;
