@@ -484,10 +484,7 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
     for (size_t i = 0; i < std::min<size_t>(2, b.corruptions.size()); ++i)
       n << b.corruptions[i] << "; ";
   }
-  run.note = n.str();
-  if (run.note.size() >= 2 && run.note.compare(run.note.size() - 2, 2, "; ") == 0) {
-    run.note.resize(run.note.size() - 2);
-  }
+  run.note = bf::TrimNote(n.str());
   return out;
 }
 

@@ -196,7 +196,8 @@ class FileFaults {
     if (text.find(expected) == std::string::npos) {
       run.note += "the replay's output does not say '" + expected + "'; ";
     }
-    return Finish(run, dir);
+    run.note = TrimNote(run.note);
+    return run;
   }
 
   bench::Run LogCorrupted() {
@@ -241,7 +242,8 @@ class FileFaults {
         .Add("events_in_damage", static_cast<double>(in_damage))
         .Add("events_delivered", static_cast<double>(delivered));
     if (!named) run.note += "the replay's output names no byte offset inside the damage; ";
-    return Finish(run, dir);
+    run.note = TrimNote(run.note);
+    return run;
   }
 
   bench::Run DiskFullReplayLog() {
@@ -355,14 +357,7 @@ class FileFaults {
         break;
       }
     }
-    return Finish(run, dir);
-  }
-
-  // Notes end without a separator; the run's files are in `dir` (printed at the end).
-  bench::Run Finish(bench::Run run, const std::string&) {
-    while (run.note.size() >= 2 && run.note.compare(run.note.size() - 2, 2, "; ") == 0) {
-      run.note.resize(run.note.size() - 2);
-    }
+    run.note = TrimNote(run.note);
     return run;
   }
 
@@ -375,6 +370,11 @@ class FileFaults {
 };
 
 }  // namespace
+
+std::string TrimNote(std::string note) {
+  while (note.size() >= 2 && note.compare(note.size() - 2, 2, "; ") == 0) note.resize(note.size() - 2);
+  return note;
+}
 
 std::vector<std::string> FileFaultNames() {
   return {"log_truncated", "log_corrupted", "disk_full_replay_log", "disk_full_map_save",

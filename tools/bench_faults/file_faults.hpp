@@ -42,6 +42,9 @@ std::vector<std::string> FileFaultNames();
 std::vector<fl::bench::Run> RunFileFaults(const FileFaultSetup& setup,
                                           const std::vector<std::string>& only);
 
+// A run's note without its trailing "; " separators.
+std::string TrimNote(std::string note);
+
 // The RMSE [m] of FUSED_TRAJECTORY against GROUND_TRUTH in an LCM log (SE(2) alignment, as the
 // demo); -1 with a reason appended to `note` if it cannot be computed.
 double FusedAte(const std::string& log, std::string* note);
