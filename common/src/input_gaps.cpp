@@ -22,8 +22,10 @@ bool InputGaps::Add(const std::string& channel, Utime utime) {
     return false;
   }
   if (utime <= s.last) return false;
-  const Utime interval = utime - s.last;
+  Utime interval = 0;
+  const bool overflow = __builtin_sub_overflow(utime, s.last, &interval);
   s.last = utime;
+  if (overflow || interval > kMaxGapUs) return false;
   bool gap = false;
   if (s.intervals.size() >= kMinIntervals) {
     const Utime period = Median(s.intervals);

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 namespace fl {
 namespace {
 
@@ -37,6 +39,21 @@ TEST(InputGaps, JitterRepeatsAndTheStartAreNotGaps) {
   EXPECT_EQ(g.gaps("ODOMETRY"), 0);
   EXPECT_FALSE(g.Add("ODOMETRY", t + 13000));  // 1.1-1.6 periods: jitter, not a gap
   EXPECT_TRUE(g.Add("ODOMETRY", t + 13000 + 30000));
+}
+
+TEST(InputGaps, ClockJumpsAndCorruptStampsAreNotGaps) {
+  // Found by the fusion_node fuzzer: a stamp near INT64_MIN then a sane one overflowed the
+  // interval (undefined behaviour) and would have counted ~1e13 missing messages.
+  InputGaps g;
+  EXPECT_FALSE(g.Add("LASER", std::numeric_limits<Utime>::min() + 1000000));
+  EXPECT_FALSE(g.Add("LASER", 1200000));
+  Utime t = 1200000;
+  for (int i = 0; i < 10; ++i) EXPECT_FALSE(g.Add("LASER", t += 100000));
+  EXPECT_FALSE(g.Add("LASER", t += 3600LL * 1000000));  // an hour forward: a clock jump
+  EXPECT_EQ(g.gaps("LASER"), 0);
+  EXPECT_EQ(g.missing("LASER"), 0);
+  EXPECT_TRUE(g.Add("LASER", t += 500000));  // 5 periods on the new clock: a gap
+  EXPECT_EQ(g.missing("LASER"), 4);
 }
 
 }  // namespace

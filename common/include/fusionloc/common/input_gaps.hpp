@@ -18,6 +18,9 @@ class InputGaps {
   static constexpr double kGapFactor = 1.8;   // an interval this many periods long is a gap
   static constexpr size_t kIntervals = 15;    // intervals the period is the median of
   static constexpr size_t kMinIntervals = 5;  // before this many, no period is known
+  // [us] a step longer than this (or one that overflows) is a clock jump or a corrupt stamp,
+  // not lost messages: the stream goes on from the new stamp and no gap is counted.
+  static constexpr Utime kMaxGapUs = 600 * 1000000LL;
 
   // Records a message of `channel` stamped `utime`; true if it ends a gap. Stamps that do not
   // advance (repeats, out of order) are ignored here (the consumer rejects them).

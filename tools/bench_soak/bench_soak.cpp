@@ -1,0 +1,336 @@
+// fl-bench-soak (./fusionloc bench soak --minutes N): the simulated robot through all its
+// processes for N minutes, as on the robot (config/procman/sim.cfg: fl-rbpf-slam,
+// fl-stereo-vo, fl-fusion with its journal and map, fl-sim in real time looping its route),
+// under a procman deputy with auto-respawn, over loopback UDP multicast (ttl=0).
+//
+// Sampled every --sample-s (60 s): the resident memory of each process (procman's /proc
+// figures for its process group), the latency from a LASER message's arrival to the arrival
+// of the FUSED_POSE of the same stamp (p99 of that minute), and the sizes the processes
+// report in their STATUS: the fusion's graph nodes and factors and map keyframes, the
+// RBPF-SLAM's keyframes, the journal's size on disk. After the warm-up, the slope of each
+// (least squares) per 10 minutes: rss_slope_mb_per_10min per process (flat: |slope| < 1 MB per
+// 10 min) and size_slope_per_10min per size (bounded: the graph stops growing once the route
+// has been mapped). Messages lost: what the simulator's schedule published minus what arrived
+// here. Every sample also goes to OUT/samples.csv.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <sstream>
+
+#include "bot_core/planar_lidar_t.hpp"
+#include "fusionloc/bench/bench.hpp"
+#include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/number_format.hpp"
+#include "fusionloc/common/program.hpp"
+#include "fusionloc/common/shutdown.hpp"
+#include "fusionloc/common/status_reporter.hpp"
+#include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/fused_pose_t.hpp"
+#include "fusionloc/sim_pipeline/sim_pipeline.hpp"
+#include "fusionloc/status_t.hpp"
+
+namespace {
+
+using fl::bench::NowSeconds;
+
+struct Setup {
+  std::string bin, config_dir, out_dir, world = "paper";
+  double minutes = 30.0;
+  double warmup_minutes = -1.0;  // < 0: min(5, minutes / 3)
+  double sample_s = 60.0;
+  int64_t seed = 1;
+  int port = 7660;
+};
+
+// A sampled size (status key or file size) and where it comes from.
+struct SizeSeries {
+  std::string name;     // row name
+  std::string channel;  // STATUS_ channel ("" : not from status)
+  std::string key;      // status key
+};
+
+// Least-squares slope of (t, y) for t >= t_from, per unit of t; NaN with fewer than 2 points.
+double Slope(const std::vector<double>& t, const std::vector<double>& y, double t_from) {
+  double n = 0, st = 0, sy = 0, stt = 0, sty = 0;
+  for (size_t i = 0; i < t.size(); ++i) {
+    if (t[i] < t_from || !std::isfinite(y[i])) continue;
+    n += 1;
+    st += t[i];
+    sy += y[i];
+    stt += t[i] * t[i];
+    sty += t[i] * y[i];
+  }
+  const double d = n * stt - st * st;
+  if (n < 2 || d <= 0) return std::nan("");
+  return (n * sty - st * sy) / d;
+}
+
+// The value at the first sample with t >= t_from (NaN if none).
+double At(const std::vector<double>& t, const std::vector<double>& y, double t_from) {
+  for (size_t i = 0; i < t.size(); ++i) {
+    if (t[i] >= t_from) return y[i];
+  }
+  return std::nan("");
+}
+
+int RunSoak(const Setup& s, fl::bench::Report* report) {
+  std::filesystem::create_directories(s.out_dir);
+  const std::string dir = std::filesystem::absolute(s.out_dir).string();
+  fl::sim::SimOptions sim = fl::sim::DefaultOptionsForWorld(s.world);
+  sim.duration_s = 60.0 * s.minutes;
+  sim.seed = s.seed;
+  const fl::Status valid = sim.Validate();
+  if (!valid.ok()) throw fl::UsageError("simulator options: " + valid.message());
+  {
+    std::ofstream yaml(dir + "/sim.yaml");
+    yaml << fl::SaveYamlString(sim);
+  }
+  const double warmup_s =
+      60.0 * (s.warmup_minutes >= 0 ? s.warmup_minutes : std::min(5.0, s.minutes / 3.0));
+  std::filesystem::remove(dir + "/fusion.journal");
+
+  const std::string url =
+      "udpm://239.255.76.67:" + std::to_string(s.port) + "?ttl=0&recv_buf_size=16777216";
+  auto lcm = fl::MakeLcm(url);
+  std::map<std::string, int64_t> received;
+  std::map<int64_t, double> laser_at, fused_at;
+  std::map<std::string, std::map<std::string, double>> status;  // channel -> key -> value
+  lcm->SubscribeRaw(".*",
+                    [&](const std::string& ch, const void*, int, fl::Utime) { ++received[ch]; });
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER", [&](const auto& m, const std::string&) { laser_at.emplace(m.utime, NowSeconds()); });
+  lcm->Subscribe<fusionloc::fused_pose_t>("FUSED_POSE", [&](const auto& m, const std::string&) {
+    fused_at.emplace(m.utime, NowSeconds());
+  });
+  lcm->Subscribe<fusionloc::status_t>("STATUS_.*", [&](const auto& m, const std::string& ch) {
+    auto& st = status[ch];
+    for (int k = 0; k < m.num_keys; ++k) {
+      st[m.keys[static_cast<size_t>(k)]] = m.values[static_cast<size_t>(k)];
+    }
+  });
+
+  fl::procman::DeputyOptions dopt;
+  dopt.name = "bench-soak";
+  dopt.log_dir = dir;
+  dopt.vars = {{"BIN", s.bin}, {"CONFIG", s.config_dir}, {"URL", url}, {"DIR", dir}};
+  fl::bench::SimPipeline pipeline(
+      dopt,
+      {{"rbpf_slam", "${BIN}/fl-rbpf-slam --lcm-url=${URL} --config ${CONFIG}/rbpf_slam.yaml",
+        true},
+       {"stereo_vo", "${BIN}/fl-stereo-vo --lcm-url=${URL} --config ${CONFIG}/stereo_vo.yaml",
+        true},
+       {"fusion",
+        "${BIN}/fl-fusion --lcm-url=${URL} --config ${CONFIG}/fusion.yaml --map-out ${DIR}/map "
+        "--journal ${DIR}/fusion.journal",
+        true},
+       {"sim",
+        "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${DIR}/sim.yaml "
+        "--rate 1",
+        false}});
+  auto spin = [&](double seconds) {
+    const double end = NowSeconds() + seconds;
+    while (NowSeconds() < end && !fl::ShutdownRequested()) {
+      lcm->HandleSubscriptions(2);
+      pipeline.Poll();
+    }
+  };
+  pipeline.Start(spin);
+  const double t0 = NowSeconds();
+
+  const std::vector<std::string> procs = {"rbpf_slam", "stereo_vo", "fusion", "sim"};
+  const std::vector<SizeSeries> sizes = {{"fusion_nodes", fl::StatusChannel("fl-fusion"), "nodes"},
+                                         {"fusion_factors", fl::StatusChannel("fl-fusion"), "factors"},
+                                         {"map_keyframes", fl::StatusChannel("fl-fusion"), "map_keyframes"},
+                                         {"map_points", fl::StatusChannel("fl-fusion"), "map_points"},
+                                         {"rbpf_keyframes", fl::StatusChannel("fl-rbpf-slam"), "keyframes"},
+                                         {"journal_mb", "", ""}};
+  std::vector<double> sample_t;                         // [min] since the simulator started
+  std::map<std::string, std::vector<double>> rss, size;  // per process [MB] / per size
+  std::vector<double> minute_p99;
+  std::ofstream csv(dir + "/samples.csv");
+  csv << "minute";
+  for (const auto& p : procs) csv << ",rss_mb_" << p;
+  for (const auto& z : sizes) csv << "," << z.name;
+  csv << ",latency_ms_p99\n";
+  size_t latency_from = 0;  // laser_at is ordered by stamp = arrival order of the simulator
+  std::vector<double> all_latency_ms;
+
+  auto take_sample = [&] {
+    const fl::procman::HostStatus hs = pipeline.Measure();
+    const double t_min = (NowSeconds() - t0) / 60.0;
+    sample_t.push_back(t_min);
+    csv << fl::FormatDouble(t_min);
+    for (const auto& p : procs) {
+      double mb = std::nan("");
+      for (const auto& c : hs.cmds) {
+        if (c.spec.name == p && c.state == fl::procman::CommandState::kRunning) {
+          mb = static_cast<double>(c.rss_bytes) / 1048576.0;
+        }
+      }
+      rss[p].push_back(mb);
+      csv << "," << fl::FormatDouble(mb);
+    }
+    for (const auto& z : sizes) {
+      double v = std::nan("");
+      if (z.channel.empty()) {
+        std::error_code ec;
+        const auto bytes = std::filesystem::file_size(dir + "/fusion.journal", ec);
+        if (!ec) v = static_cast<double>(bytes) / 1048576.0;
+      } else if (status.count(z.channel) && status[z.channel].count(z.key)) {
+        v = status[z.channel][z.key];
+      }
+      size[z.name].push_back(v);
+      csv << "," << fl::FormatDouble(v);
+    }
+    // Latency of the scans that arrived since the last sample and have their fused pose.
+    std::vector<double> lat;
+    size_t k = 0;
+    for (auto it = laser_at.begin(); it != laser_at.end(); ++it, ++k) {
+      if (k < latency_from) continue;
+      const auto f = fused_at.find(it->first);
+      if (f != fused_at.end()) lat.push_back(1e3 * (f->second - it->second));
+    }
+    latency_from = laser_at.size();
+    const double p99 = lat.empty() ? std::nan("") : fl::bench::ComputeStats(lat).p99;
+    minute_p99.push_back(p99);
+    all_latency_ms.insert(all_latency_ms.end(), lat.begin(), lat.end());
+    csv << "," << fl::FormatDouble(p99) << "\n";
+    csv.flush();
+  };
+
+  fl::bench::Progress progress("bench soak", static_cast<int64_t>(sim.duration_s), 30.0);
+  double next_sample = NowSeconds() + s.sample_s;
+  while (!pipeline.SimExited() && !fl::ShutdownRequested() &&
+         NowSeconds() - t0 < 2 * sim.duration_s + 60) {
+    spin(0.05);
+    if (NowSeconds() >= next_sample) {
+      take_sample();
+      next_sample += s.sample_s;
+      progress.Update(std::min<int64_t>(static_cast<int64_t>(NowSeconds() - t0),
+                                        static_cast<int64_t>(sim.duration_s)));
+    }
+  }
+  progress.Finish();
+  spin(3.0);  // the last scans through the estimators and the fusion
+  take_sample();
+  const double wall_s = NowSeconds() - t0;
+  pipeline.StopAll();
+  pipeline.Poll();
+  if (fl::ShutdownRequested()) return fl::kExitFailure;
+
+  const double warm_min = warmup_s / 60.0;
+  for (const auto& p : procs) {
+    fl::bench::Run run;
+    run.name = p;
+    run.input = "world " + s.world + ", " + fl::FormatDouble(s.minutes) + " min real time";
+    const double slope = 10.0 * Slope(sample_t, rss[p], warm_min);
+    run.Add("rss_mb_warm", At(sample_t, rss[p], warm_min))
+        .Add("rss_mb_end", rss[p].empty() ? std::nan("") : rss[p].back())
+        .Add("rss_slope_mb_per_10min", slope);
+    for (const auto& c : pipeline.Commands()) {
+      if (c.spec.name != p) continue;
+      run.Add("peak_rss_mb", static_cast<double>(c.peak_rss_bytes) / 1048576.0)
+          .Add("cpu_pct", 100.0 * c.cpu_time_s / wall_s)
+          .Add("respawns", c.respawns);
+    }
+    if (p != "sim") {
+      run.note = std::isfinite(slope) && std::fabs(slope) < 1.0
+                     ? "flat (|slope| < 1 MB per 10 min): met"
+                     : "flat (|slope| < 1 MB per 10 min): NOT met";
+    }
+    report->AddRun(run);
+  }
+  for (const auto& z : sizes) {
+    fl::bench::Run run;
+    run.name = z.name;
+    run.input = z.channel.empty() ? dir + "/fusion.journal" : z.channel + " " + z.key;
+    const std::vector<double>& y = size[z.name];
+    run.Add("size_warm", At(sample_t, y, warm_min))
+        .Add("size_end", y.empty() ? std::nan("") : y.back())
+        .Add("size_slope_per_10min", 10.0 * Slope(sample_t, y, warm_min));
+    report->AddRun(run);
+  }
+  fl::bench::Run run;
+  run.name = "pipeline";
+  run.input = "world " + s.world + ", seed " + std::to_string(s.seed) + ", " +
+              fl::FormatDouble(s.minutes) + " min real time, samples every " +
+              fl::FormatDouble(s.sample_s) + " s in " + dir + "/samples.csv";
+  const fl::bench::Stats lat = fl::bench::ComputeStats(all_latency_ms);
+  double worst = 0.0;
+  for (double p : minute_p99) {
+    if (std::isfinite(p)) worst = std::max(worst, p);
+  }
+  const std::map<std::string, int64_t> expected = fl::bench::SimSchedule(sim);
+  int64_t lost = 0;
+  for (const auto& [ch, n] : expected) lost += std::max<int64_t>(0, n - received[ch]);
+  run.Add("latency_ms_p50", lat.median)
+      .Add("latency_ms_p99", lat.p99)
+      .Add("latency_ms_p99_worst_minute", worst)
+      .Add("messages_lost", static_cast<double>(lost))
+      .Add("scans_without_fused_pose",
+           static_cast<double>(expected.at("LASER")) - static_cast<double>(all_latency_ms.size()))
+      .Add("crashes", pipeline.crashes());
+  std::ostringstream note;
+  note << "warm-up " << fl::FormatDouble(warm_min) << " min; "
+       << (pipeline.crashes() == 0 ? "no crash" : "CRASHES: " + pipeline.crash_note());
+  run.note = note.str();
+  report->AddRun(run);
+  return pipeline.crashes() == 0 ? fl::kExitOk : fl::kExitFailure;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  fl::Program program(
+      "fl-bench-soak",
+      "The simulated robot through all its processes under a procman deputy for --minutes, the "
+      "simulator in real time looping its route: resident memory per process and its slope "
+      "after the warm-up (rss_slope_mb_per_10min; flat: under 1 MB per 10 min), latency "
+      "LASER -> FUSED_POSE p99 per minute, messages lost, and the graph, map and journal sizes "
+      "with their slopes. Samples in OUT/samples.csv.");
+  fl::bench::CommonArgs common;
+  fl::bench::AddCommonFlags(&program.cli(), &common, "soak");
+  Setup s;
+  char self[4096] = {0};
+  if (readlink("/proc/self/exe", self, sizeof(self) - 1) > 0) {
+    s.bin = std::filesystem::path(self).parent_path().string();
+  }
+  s.config_dir = "config";
+  s.out_dir = "out/bench/soak";
+  program.cli().AddFlag("minutes", &s.minutes, "[min] length of the run (simulated = wall time)");
+  program.cli().AddFlag("warmup-minutes", &s.warmup_minutes,
+                        "[min] samples before this are left out of the slopes (default: "
+                        "min(5, minutes / 3))");
+  program.cli().AddFlag("sample-s", &s.sample_s, "[s] sampling period");
+  program.cli().AddFlag("world", &s.world, "simulated world: paper or corridor");
+  program.cli().AddFlag("seed", &s.seed, "simulator seed");
+  program.cli().AddFlag("bin", &s.bin, "folder of the fl-* programs");
+  program.cli().AddFlag("config-dir", &s.config_dir,
+                        "folder of rbpf_slam.yaml, stereo_vo.yaml, fusion.yaml, robot/sim.yaml");
+  program.cli().AddFlag("out", &s.out_dir, "folder for the processes' logs, journal, map, samples");
+  program.cli().AddFlag("port", &s.port, "UDP port of the benchmark's LCM (loopback, ttl=0)");
+  if (!program.Parse(argc, argv)) return program.exit_code();
+  return program.Run([&] {
+    if (!(s.minutes > 0.0 && s.minutes <= 24 * 60)) {
+      throw fl::UsageError("--minutes must be in (0, 1440], not " + fl::FormatDouble(s.minutes));
+    }
+    if (!(s.sample_s >= 1.0 && s.sample_s <= 60.0 * s.minutes)) {
+      throw fl::UsageError("--sample-s must be >= 1 s and at most the run's length");
+    }
+    if (s.warmup_minutes >= s.minutes) {
+      throw fl::UsageError("--warmup-minutes must be shorter than --minutes");
+    }
+    fl::InstallShutdownHandlers();
+    fl::bench::Report report("soak");
+    const int rc = RunSoak(s, &report);
+    if (fl::ShutdownRequested()) return fl::kExitFailure;
+    fl::bench::Publish(report, common);
+    return rc;
+  });
+}
