@@ -33,6 +33,7 @@
 
 #include "bot_core/planar_lidar_t.hpp"
 #include "bot_core/pose_t.hpp"
+#include "file_faults.hpp"
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/bench_faults/fault_injector.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
@@ -42,22 +43,15 @@
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/eval/trajectory.hpp"
 #include "fusionloc/fused_pose_t.hpp"
-#include "fusionloc/procman/deputy.hpp"
+#include "fusionloc/sim_pipeline/sim_pipeline.hpp"
 #include "fusionloc/status_t.hpp"
-#include "file_faults.hpp"
 
 namespace {
 
 namespace bf = fl::bench_faults;
 
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-int64_t WallUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+using fl::bench::WallUs;
+double Now() { return fl::bench::NowSeconds(); }
 
 struct Setup {
   std::string bin, config_dir, out_dir, world = "paper";
@@ -257,57 +251,25 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
                {"WORLD", s.world},
                {"DURATION", fl::FormatDouble(s.duration_s)},
                {"SEED", std::to_string(s.seed)}};
-  fl::procman::Deputy deputy(dopt, nullptr);
-  fl::procman::Orders orders;
-  orders.host = dopt.name;
-  const char* execs[][2] = {
-      {"rbpf_slam", "${BIN}/fl-rbpf-slam --lcm-url=${URL_E} --config ${CONFIG}/rbpf_slam.yaml"},
-      {"stereo_vo", "${BIN}/fl-stereo-vo --lcm-url=${URL_E} --config ${CONFIG}/stereo_vo.yaml"},
-      {"fusion",
-       "${BIN}/fl-fusion --lcm-url=${URL_F} --config ${CONFIG}/fusion.yaml --journal "
-       "${DIR}/fusion.journal"},
-      {"sim",
-       "${BIN}/fl-sim --lcm-url=${URL_S} --robot ${CONFIG}/robot/sim.yaml --world "
-       "${WORLD} --duration ${DURATION} --seed ${SEED} --rate 1"}};
-  for (int i = 0; i < 4; ++i) {
-    fl::procman::CommandOrder c;
-    c.spec.sheriff_id = i + 1;
-    c.spec.name = execs[i][0];
-    c.spec.exec = execs[i][1];
-    c.spec.auto_respawn = i < 3;
-    c.spec.stop_signal = 15;
-    c.spec.stop_time_allowed_s = 15;
-    c.desired_runid = i < 3 ? 1 : 0;  // the simulator once the others listen
-    orders.cmds.push_back(c);
-  }
-
-  // Crashes: an exit seen while running that is neither our kill nor a clean stop.
-  std::map<std::string, fl::procman::CommandState> state;
-  int crashes = 0;
-  std::ostringstream crash_note;
   double killed_at = -1;
-  auto watch = [&] {
-    for (const auto& c : deputy.Commands()) {
-      const auto before =
-          state.count(c.spec.name) ? state[c.spec.name] : fl::procman::CommandState::kStopped;
-      if (before == fl::procman::CommandState::kRunning &&
-          c.state != fl::procman::CommandState::kRunning &&
-          c.state != fl::procman::CommandState::kStopping && c.exited) {
-        const int st = c.exit_status;
-        const bool ours =
-            killed_at > 0 && c.spec.name == sc.kill && WIFSIGNALED(st) && WTERMSIG(st) == SIGKILL;
-        const bool clean = WIFEXITED(st) && WEXITSTATUS(st) == 0;
-        if (!ours && !clean) {
-          ++crashes;
-          crash_note << c.spec.name << " "
-                     << (WIFSIGNALED(st) ? "killed by signal " + std::to_string(WTERMSIG(st))
-                                         : "exit " + std::to_string(WEXITSTATUS(st)))
-                     << " (see " << c.log_path << "); ";
-        }
-      }
-      state[c.spec.name] = c.state;
-    }
-  };
+  fl::bench::SimPipeline pipeline(
+      dopt, {{"rbpf_slam",
+              "${BIN}/fl-rbpf-slam --lcm-url=${URL_E} --config ${CONFIG}/rbpf_slam.yaml", true},
+             {"stereo_vo",
+              "${BIN}/fl-stereo-vo --lcm-url=${URL_E} --config ${CONFIG}/stereo_vo.yaml", true},
+             {"fusion",
+              "${BIN}/fl-fusion --lcm-url=${URL_F} --config ${CONFIG}/fusion.yaml --journal "
+              "${DIR}/fusion.journal",
+              true},
+             {"sim",
+              "${BIN}/fl-sim --lcm-url=${URL_S} --robot ${CONFIG}/robot/sim.yaml --world "
+              "${WORLD} --duration ${DURATION} --seed ${SEED} --rate 1",
+              false}});
+  // Crashes: an exit seen while running that is neither our kill nor a clean stop.
+  pipeline.set_expected_exit([&](const fl::procman::CommandStatus& c) {
+    return killed_at > 0 && c.spec.name == sc.kill && WIFSIGNALED(c.exit_status) &&
+           WTERMSIG(c.exit_status) == SIGKILL;
+  });
   auto spin = [&](double seconds, const std::function<bool()>& done) {
     const double end = Now() + seconds;
     fl::bench_faults::FaultEvent e;
@@ -322,29 +284,17 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
         bus_e->PublishRaw(e.channel, e.data.data(), static_cast<int>(e.data.size()), 0);
       while (hop_ef.Pop(t_now, &e))
         bus_f->PublishRaw(e.channel, e.data.data(), static_cast<int>(e.data.size()), 0);
-      deputy.Poll();
-      watch();
+      pipeline.Poll();
     }
   };
-  orders.utime_us = WallUs();
-  deputy.HandleOrders(orders, WallUs());
-  spin(2.5, nullptr);
+  pipeline.Start([&](double seconds) { spin(seconds, nullptr); });
   const double t0 = Now();
-  orders.cmds[3].desired_runid = 1;
-  orders.utime_us = WallUs();
-  deputy.HandleOrders(orders, WallUs());
-  auto sim_done = [&] {
-    for (const auto& c : deputy.Commands()) {
-      if (c.spec.name == "sim") return c.exited;
-    }
-    return false;
-  };
   fl::bench::Progress progress("bench faults " + sc.name, static_cast<int64_t>(s.duration_s));
   double next_measure = Now() + 1.0;
-  while (!sim_done() && !fl::ShutdownRequested() && Now() - t0 < 3 * s.duration_s + 30) {
+  while (!pipeline.SimExited() && !fl::ShutdownRequested() && Now() - t0 < 3 * s.duration_s + 30) {
     spin(0.05, nullptr);
     if (!sc.kill.empty() && killed_at < 0 && Now() - t0 >= s.kill_at * s.duration_s) {
-      for (const auto& c : deputy.Commands()) {
+      for (const auto& c : pipeline.Commands()) {
         if (c.spec.name == sc.kill && c.pid > 0) {
           killed_at = Now();
           ::kill(c.pid, SIGKILL);
@@ -352,7 +302,7 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
       }
     }
     if (Now() >= next_measure) {
-      deputy.MeasureStatus(WallUs());
+      pipeline.Measure();
       next_measure += 1.0;
       progress.Update(
           std::min<int64_t>(static_cast<int64_t>(Now() - t0), static_cast<int64_t>(s.duration_s)));
@@ -365,7 +315,7 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
   hop_se.Flush();
   hop_ef.Flush();
   spin(3.0, nullptr);
-  deputy.StopAll();
+  pipeline.StopAll();
   // The fusion's final FUSED_TRAJECTORY, published on its way out.
   {
     const double end = Now() + 1.0;
@@ -373,8 +323,11 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
       bus_f->HandleSubscriptions(5);
     }
   }
-  watch();
-  for (const auto& c : deputy.Commands()) {
+  pipeline.Poll();
+  int crashes = pipeline.crashes();
+  std::ostringstream crash_note;
+  crash_note << pipeline.crash_note();
+  for (const auto& c : pipeline.Commands()) {
     // A process that had to be SIGKILLed at the stop, or exited non-zero then, failed too.
     if (c.exited && c.spec.name != "sim" &&
         !(WIFEXITED(c.exit_status) && WEXITSTATUS(c.exit_status) == 0) &&
@@ -470,7 +423,7 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
       .Add("injected_shifted", static_cast<double>(a.shifted + b.shifted))
       .Add("injected_corrupted", static_cast<double>(a.corrupted + b.corrupted));
   int respawns = 0;
-  for (const auto& c : deputy.Commands()) respawns += c.respawns;
+  for (const auto& c : pipeline.Commands()) respawns += c.respawns;
   run.Add("respawns", respawns);
   std::ostringstream n;
   n << note << crash_note.str();
@@ -526,8 +479,7 @@ int main(int argc, char** argv) {
                         "default: all");
   program.cli().AddFlag("no-file-faults", &no_files,
                         "skip the file faults (damaged logs, full disks)");
-  program.cli().AddFlag("file-faults-only", &only_files,
-                        "only the file faults (no process runs)");
+  program.cli().AddFlag("file-faults-only", &only_files, "only the file faults (no process runs)");
   program.cli().AddCheck([&]() -> std::string {
     if (no_files && only_files) return "--no-file-faults and --file-faults-only exclude each other";
     if (!(s.duration_s >= 10)) return "--duration must be >= 10 s";
@@ -574,9 +526,8 @@ int main(int argc, char** argv) {
       }
       std::cout << sc.name << ": crashes " << o.run.Get("crashes") << ", fused ATE "
                 << std::setprecision(3) << o.fused_ate_m << " m, ratio "
-                << o.run.Get("fused_ate_ratio") << ", messages lost "
-                << o.run.Get("messages_lost") << ", recovery " << o.run.Get("recovery_s")
-                << " s" << std::endl;
+                << o.run.Get("fused_ate_ratio") << ", messages lost " << o.run.Get("messages_lost")
+                << ", recovery " << o.run.Get("recovery_s") << " s" << std::endl;
       report.AddRun(o.run);
       if (fl::ShutdownRequested()) return fl::kExitFailure;
     }

@@ -144,13 +144,14 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
   const double t0 = NowSeconds();
 
   const std::vector<std::string> procs = {"rbpf_slam", "stereo_vo", "fusion", "sim"};
-  const std::vector<SizeSeries> sizes = {{"fusion_nodes", fl::StatusChannel("fl-fusion"), "nodes"},
-                                         {"fusion_factors", fl::StatusChannel("fl-fusion"), "factors"},
-                                         {"map_keyframes", fl::StatusChannel("fl-fusion"), "map_keyframes"},
-                                         {"map_points", fl::StatusChannel("fl-fusion"), "map_points"},
-                                         {"rbpf_keyframes", fl::StatusChannel("fl-rbpf-slam"), "keyframes"},
-                                         {"journal_mb", "", ""}};
-  std::vector<double> sample_t;                         // [min] since the simulator started
+  const std::vector<SizeSeries> sizes = {
+      {"fusion_nodes", fl::StatusChannel("fl-fusion"), "nodes"},
+      {"fusion_factors", fl::StatusChannel("fl-fusion"), "factors"},
+      {"map_keyframes", fl::StatusChannel("fl-fusion"), "map_keyframes"},
+      {"map_points", fl::StatusChannel("fl-fusion"), "map_points"},
+      {"rbpf_keyframes", fl::StatusChannel("fl-rbpf-slam"), "keyframes"},
+      {"journal_mb", "", ""}};
+  std::vector<double> sample_t;                          // [min] since the simulator started
   std::map<std::string, std::vector<double>> rss, size;  // per process [MB] / per size
   std::vector<double> minute_p99;
   std::ofstream csv(dir + "/samples.csv");

@@ -30,19 +30,11 @@
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/fused_pose_t.hpp"
-#include "fusionloc/procman/deputy.hpp"
-#include "fusionloc/sim/sim_options.hpp"
+#include "fusionloc/sim_pipeline/sim_pipeline.hpp"
 
 namespace {
 
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-int64_t WallUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+using fl::bench::NowSeconds;
 
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path);
@@ -56,23 +48,6 @@ struct Setup {
   double duration_s = 30.0;
   int port = 7650;
 };
-
-// Messages of each sensor channel the simulator publishes for `o` (its schedule).
-std::map<std::string, int64_t> Schedule(const fl::sim::SimOptions& o) {
-  const int64_t frames = o.steps() + 1;
-  auto count = [&](int64_t period) { return period <= 0 ? 0 : (frames - 1) / period + 1; };
-  std::map<std::string, int64_t> n;
-  n["GROUND_TRUTH"] = frames;
-  // Calibration and mountings together, every calibration period (simulator.cpp).
-  const int64_t every = count(o.PeriodSteps(1.0 / o.calibration_period_s));
-  n["STEREO_CALIBRATION"] = o.camera.enabled ? every : 0;
-  n["CAMERA_TO_BASE"] = o.camera.enabled ? every : 0;
-  n["LASER_TO_BASE"] = o.laser.enabled ? every : 0;
-  n["ODOMETRY"] = count(o.PeriodSteps(o.odometry.rate_hz));
-  n["LASER"] = o.laser.enabled ? count(o.PeriodSteps(o.laser.rate_hz)) : 0;
-  n["STEREO"] = o.camera.enabled ? count(o.PeriodSteps(o.camera.rate_hz)) : 0;
-  return n;
-}
 
 fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
   const std::string rate = stereo_hz == std::floor(stereo_hz)
@@ -98,69 +73,49 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
   lcm->SubscribeRaw(".*",
                     [&](const std::string& ch, const void*, int, fl::Utime) { ++received[ch]; });
   lcm->Subscribe<bot_core::planar_lidar_t>(
-      "LASER", [&](const auto& m, const std::string&) { laser_at.emplace(m.utime, Now()); });
-  lcm->Subscribe<fusionloc::fused_pose_t>(
-      "FUSED_POSE", [&](const auto& m, const std::string&) { fused_at.emplace(m.utime, Now()); });
+      "LASER", [&](const auto& m, const std::string&) { laser_at.emplace(m.utime, NowSeconds()); });
+  lcm->Subscribe<fusionloc::fused_pose_t>("FUSED_POSE", [&](const auto& m, const std::string&) {
+    fused_at.emplace(m.utime, NowSeconds());
+  });
 
   fl::procman::DeputyOptions dopt;
   dopt.name = "bench";
   dopt.log_dir = dir;
   dopt.vars = {{"BIN", s.bin}, {"CONFIG", s.config_dir}, {"URL", url}, {"SIM", dir + "/sim.yaml"}};
-  fl::procman::Deputy deputy(dopt, nullptr);
-  fl::procman::Orders orders;
-  orders.host = "bench";
-  const char* execs[][2] = {
-      {"rbpf_slam", "${BIN}/fl-rbpf-slam --lcm-url=${URL} --config ${CONFIG}/rbpf_slam.yaml"},
-      {"stereo_vo", "${BIN}/fl-stereo-vo --lcm-url=${URL} --config ${CONFIG}/stereo_vo.yaml"},
-      {"fusion", "${BIN}/fl-fusion --lcm-url=${URL} --config ${CONFIG}/fusion.yaml"},
-      {"sim",
-       "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${SIM} --rate 1"}};
-  for (int i = 0; i < 4; ++i) {
-    fl::procman::CommandOrder c;
-    c.spec.sheriff_id = i + 1;
-    c.spec.name = execs[i][0];
-    c.spec.exec = execs[i][1];
-    c.spec.stop_signal = 15;
-    c.spec.stop_time_allowed_s = 10;
-    c.desired_runid = i < 3 ? 1 : 0;  // the simulator once the others listen
-    orders.cmds.push_back(c);
-  }
-  auto spin = [&](double seconds, const std::function<bool()>& done) {
-    const double end = Now() + seconds;
-    while (Now() < end && !fl::ShutdownRequested() && !(done && done())) {
+  fl::bench::SimPipeline pipeline(
+      dopt,
+      {{"rbpf_slam", "${BIN}/fl-rbpf-slam --lcm-url=${URL} --config ${CONFIG}/rbpf_slam.yaml"},
+       {"stereo_vo", "${BIN}/fl-stereo-vo --lcm-url=${URL} --config ${CONFIG}/stereo_vo.yaml"},
+       {"fusion", "${BIN}/fl-fusion --lcm-url=${URL} --config ${CONFIG}/fusion.yaml"},
+       {"sim",
+        "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${SIM} "
+        "--rate 1"}});
+  auto spin = [&](double seconds) {
+    const double end = NowSeconds() + seconds;
+    while (NowSeconds() < end && !fl::ShutdownRequested()) {
       lcm->HandleSubscriptions(2);
-      deputy.Poll();
+      pipeline.Poll();
     }
   };
-  orders.utime_us = WallUs();
-  deputy.HandleOrders(orders, WallUs());
-  spin(2.5, nullptr);
-  const double t0 = Now();
-  orders.cmds[3].desired_runid = 1;
-  orders.utime_us = WallUs();
-  deputy.HandleOrders(orders, WallUs());
-  auto sim_done = [&] {
-    for (const auto& c : deputy.Commands()) {
-      if (c.spec.name == "sim") return c.exited;
-    }
-    return false;
-  };
+  pipeline.Start(spin);
+  const double t0 = NowSeconds();
   fl::bench::Progress progress("bench system " + name, static_cast<int64_t>(s.duration_s));
-  double next_measure = Now() + 1.0;
-  while (!sim_done() && !fl::ShutdownRequested() && Now() - t0 < 4 * s.duration_s + 30) {
-    spin(0.05, nullptr);
-    if (Now() >= next_measure) {
-      deputy.MeasureStatus(WallUs());  // peak memory, CPU
+  double next_measure = NowSeconds() + 1.0;
+  while (!pipeline.SimExited() && !fl::ShutdownRequested() &&
+         NowSeconds() - t0 < 4 * s.duration_s + 30) {
+    spin(0.05);
+    if (NowSeconds() >= next_measure) {
+      pipeline.Measure();  // peak memory, CPU
       next_measure += 1.0;
-      progress.Update(
-          std::min<int64_t>(static_cast<int64_t>(Now() - t0), static_cast<int64_t>(s.duration_s)));
+      progress.Update(std::min<int64_t>(static_cast<int64_t>(NowSeconds() - t0),
+                                        static_cast<int64_t>(s.duration_s)));
     }
   }
   progress.Finish();
-  spin(3.0, nullptr);  // the last scans through the estimators and the fusion
-  deputy.MeasureStatus(WallUs());
-  const double wall_s = Now() - t0;
-  deputy.StopAll();
+  spin(3.0);  // the last scans through the estimators and the fusion
+  pipeline.Measure();
+  const double wall_s = NowSeconds() - t0;
+  pipeline.StopAll();
 
   fl::bench::Run run;
   run.name = name;
@@ -174,7 +129,7 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
   run.Add("latency_ms_p50", lat.median)
       .Add("latency_ms_p99", lat.p99)
       .Add("latency_ms_max", lat.max);
-  const std::map<std::string, int64_t> expected = Schedule(sim);
+  const std::map<std::string, int64_t> expected = fl::bench::SimSchedule(sim);
   int64_t total_expected = 0, lost = 0;
   for (const auto& [ch, n] : expected) {
     total_expected += n;
@@ -185,7 +140,7 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
   }
   run.Add("scans_without_fused_pose",
           static_cast<double>(expected.at("LASER")) - static_cast<double>(latency_ms.size()));
-  for (const auto& c : deputy.Commands()) {
+  for (const auto& c : pipeline.Commands()) {
     run.Add("cpu_pct_" + c.spec.name, 100.0 * c.cpu_time_s / wall_s);
     run.Add("peak_rss_mb_" + c.spec.name, static_cast<double>(c.peak_rss_bytes) / 1048576.0);
   }

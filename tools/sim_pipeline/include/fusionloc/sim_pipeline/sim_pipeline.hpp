@@ -26,8 +26,8 @@ double NowSeconds();
 int64_t WallUs();
 
 struct PipelineCommand {
-  std::string name;          // procman command name; its output goes to LOG_DIR/<name>.log
-  std::string exec;          // command line, ${VAR}s from DeputyOptions::vars
+  std::string name;  // procman command name; its output goes to LOG_DIR/<name>.log
+  std::string exec;  // command line, ${VAR}s from DeputyOptions::vars
   bool auto_respawn = false;
 };
 
