@@ -111,6 +111,15 @@ Status FusionOptions::Validate() const {
                          "' unknown; use odometry_gaps, always or never");
   }
   if (max_pending_factors < 1) return Status::Error("max_pending_factors must be >= 1");
+  if (!(active_window_s == 0.0 || (active_window_s >= 10.0 && active_window_s <= 1e6))) {
+    return Status::Error("active_window_s must be 0 (keep every node) or in [10, 1e6] s");
+  }
+  if (!(map_node_spacing_m > 0.0 && map_node_spacing_m <= 100.0) ||
+      !(map_node_spacing_rad > 0.0 && map_node_spacing_rad <= M_PI)) {
+    return Status::Error(
+        "map_node_spacing_m must be in (0, 100] m and map_node_spacing_rad in "
+        "(0, pi] rad");
+  }
   return Status::Ok();
 }
 
@@ -122,6 +131,18 @@ std::string SolveSummary::ToString(bool with_time) const {
     << num_factors << " factors";
   if (with_time) s << ", " << time_ms << " ms";
   return s.str();
+}
+
+Eigen::Matrix3d TransformBetweenInformation(const Eigen::Matrix3d& information, const Pose2& P,
+                                            const Pose2& Z, const Pose2& Q) {
+  const Eigen::Matrix2d R_P = Eigen::Rotation2Dd(P.theta).toRotationMatrix();
+  const Eigen::Matrix2d R_Z = Eigen::Rotation2Dd(Z.theta).toRotationMatrix();
+  Eigen::Matrix3d A = Eigen::Matrix3d::Identity();
+  A.topLeftCorner<2, 2>() = R_P;
+  A.topRightCorner<2, 1>() = R_P * R_Z * Eigen::Vector2d(-Q.y, Q.x);
+  const Eigen::Matrix3d A_inv = A.inverse();
+  const Eigen::Matrix3d out = A_inv.transpose() * information * A_inv;
+  return 0.5 * (out + out.transpose());
 }
 
 bool ReduceInformationToPlanar(const Eigen::Matrix<double, 6, 6>& information,
@@ -244,9 +265,10 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
   AttachPendingFactors();
   AddOdometryFactors();
   if (options_.full_solve_every_n_nodes > 0 &&
-      num_nodes() - nodes_at_last_full_solve_ >= options_.full_solve_every_n_nodes) {
+      counters_.nodes - nodes_at_last_full_solve_ >= options_.full_solve_every_n_nodes) {
     full_solve_requested_ = true;
   }
+  RetireOldNodes();
   return Status::Ok();
 }
 
@@ -292,32 +314,66 @@ Status FactorGraphFusion::AddFactor(const RelativePoseFactor& f) {
   return AttachFactor(f, T_i_j, planar);
 }
 
+int FactorGraphFusion::TimelineSize() const {
+  return static_cast<int>(retired_.size()) + num_nodes() - num_fixed_;
+}
+
+Utime FactorGraphFusion::TimelineUtime(int k) const {
+  const int r = static_cast<int>(retired_.size());
+  return k < r ? retired_[k].utime : nodes_[num_fixed_ + k - r].utime;
+}
+
+const Pose2& FactorGraphFusion::TimelineRbpf(int k) const {
+  const int r = static_cast<int>(retired_.size());
+  return k < r ? retired_[k].T_map_base_rbpf : nodes_[num_fixed_ + k - r].T_map_base_rbpf;
+}
+
+void FactorGraphFusion::TimelineNode(int k, int* node, Pose2* T_node_k) const {
+  const int r = static_cast<int>(retired_.size());
+  if (k >= r) {
+    *node = num_fixed_ + k - r;
+    *T_node_k = Pose2();
+    return;
+  }
+  const RetiredNode& d = retired_[k];
+  const auto it = std::lower_bound(nodes_.begin(), nodes_.begin() + num_fixed_, d.anchor_utime,
+                                   [](const Node& n, Utime time) { return n.utime < time; });
+  *node = static_cast<int>(it - nodes_.begin());
+  *T_node_k = ToPose2(it->state).between(d.T_map_base);
+}
+
 bool FactorGraphFusion::Attach(Utime t, int* node, Pose2* T_node_t) const {
   if (nodes_.empty()) return false;
   const Utime tol = SecondsToUtime(options_.attach_tolerance_s);
-  const auto it = std::lower_bound(nodes_.begin(), nodes_.end(), t,
-                                   [](const Node& n, Utime time) { return n.utime < time; });
-  const int b = static_cast<int>(it - nodes_.begin());
+  // First timeline entry at or after t.
+  int lo = 0, hi = TimelineSize();
+  while (lo < hi) {
+    const int mid = lo + (hi - lo) / 2;
+    if (TimelineUtime(mid) < t)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  const int b = lo;
   if (b == 0) {
     // At or before the first node: no interpolation possible; exact or within tolerance.
-    if (nodes_.front().utime - t > tol) return false;
-    *node = 0;
-    *T_node_t = Pose2();
+    if (TimelineUtime(0) - t > tol) return false;
+    TimelineNode(0, node, T_node_t);
     return true;
   }
-  if (b == num_nodes()) return false;  // beyond the newest node (the caller waits)
+  if (b == TimelineSize()) return false;  // beyond the newest node (the caller waits)
   const int a = b - 1;
-  const Node& na = nodes_[a];
-  const Node& nb = nodes_[b];
-  const int n = (t - na.utime <= nb.utime - t) ? a : b;
-  if (std::llabs(t - nodes_[n].utime) > tol &&
-      nb.utime - na.utime > SecondsToUtime(options_.attach_max_gap_s)) {
+  const Utime ta = TimelineUtime(a), tb = TimelineUtime(b);
+  const int n = (t - ta <= tb - t) ? a : b;
+  if (std::llabs(t - TimelineUtime(n)) > tol &&
+      tb - ta > SecondsToUtime(options_.attach_max_gap_s)) {
     return false;
   }
-  const double alpha = static_cast<double>(t - na.utime) / static_cast<double>(nb.utime - na.utime);
-  const Pose2 T_map_t = Interpolate(na.T_map_base_rbpf, nb.T_map_base_rbpf, alpha);
-  *node = n;
-  *T_node_t = nodes_[n].T_map_base_rbpf.between(T_map_t);
+  const double alpha = static_cast<double>(t - ta) / static_cast<double>(tb - ta);
+  const Pose2 T_map_t = Interpolate(TimelineRbpf(a), TimelineRbpf(b), alpha);
+  Pose2 T_node_n;
+  TimelineNode(n, node, &T_node_n);
+  *T_node_t = T_node_n * TimelineRbpf(n).between(T_map_t);
   return true;
 }
 
@@ -339,6 +395,10 @@ Status FactorGraphFusion::AttachFactor(const RelativePoseFactor& f, const Pose2&
                       " s of " + TimeText(f.utime_j) + ", nor two within " +
                       FormatDouble(options_.attach_max_gap_s) + " s around it; dropped");
   }
+  if (nodes_[ni].fixed && nodes_[nj].fixed) {
+    ++counters_.retired_factors;  // between two frozen poses: it can move nothing
+    return Status::Ok();
+  }
   if (ni == nj) {
     return Reject(&counters_.rejected_same_node,
                   what + ": both times attach to the same laser node; dropped");
@@ -347,11 +407,15 @@ Status FactorGraphFusion::AttachFactor(const RelativePoseFactor& f, const Pose2&
   factor.i = ni;
   factor.j = nj;
   factor.T_i_j = T_ni_ti * T_ti_tj * T_nj_tj.inverse();
-  factor.information = information;
+  factor.information =
+      TransformBetweenInformation(information, T_ni_ti, T_ti_tj, T_nj_tj.inverse());
   factor.source = f.source;
   factor.is_loop_closure = f.is_loop_closure;
   Eigen::Matrix3d sqrt_info;
-  SqrtInformation<3>(information, &sqrt_info);  // checked by ReduceInformationToPlanar
+  if (!SqrtInformation<3>(factor.information, &sqrt_info)) {
+    return Reject(&counters_.rejected_information,
+                  what + ": information not positive definite once attached; dropped");
+  }
   factor.cost.reset(Se2BetweenCost::Create(factor.T_i_j, sqrt_info));
   if (f.source != FactorSource::kWheelOdometry) factor.loss = robust_loss_;
   if (f.is_loop_closure && options_.full_solve_on_loop_closure) full_solve_requested_ = true;
@@ -361,12 +425,17 @@ Status FactorGraphFusion::AttachFactor(const RelativePoseFactor& f, const Pose2&
 
 void FactorGraphFusion::AddGraphFactor(Factor factor) {
   const int index = static_cast<int>(factors_.size());
-  const int oldest = factor.j < 0 ? factor.i : std::min(factor.i, factor.j);
+  int oldest = -1;
+  for (int e : {factor.i, factor.j}) {
+    if (e >= 0 && !nodes_[e].fixed && (oldest < 0 || e < oldest)) oldest = e;
+  }
   nodes_[factor.i].factors.push_back(index);
   if (factor.j >= 0) nodes_[factor.j].factors.push_back(index);
   factors_.push_back(std::move(factor));
   ++counters_.factors_added;
-  if (oldest_touched_node_ < 0 || oldest < oldest_touched_node_) oldest_touched_node_ = oldest;
+  if (oldest >= 0 && (oldest_touched_node_ < 0 || oldest < oldest_touched_node_)) {
+    oldest_touched_node_ = oldest;
+  }
 }
 
 void FactorGraphFusion::AttachPendingFactors() {
@@ -522,7 +591,7 @@ SolveSummary FactorGraphFusion::SolveWindow(int first) {
         if (e < 0) continue;
         double* block = nodes_[e].state.data();
         problem.SetManifold(block, manifold_.get());
-        if (e < first) problem.SetParameterBlockConstant(block);
+        if (e < first || nodes_[e].fixed) problem.SetParameterBlockConstant(block);
       }
     }
   }
@@ -573,13 +642,17 @@ SolveSummary FactorGraphFusion::SolveWindow(int first) {
 std::unique_ptr<FullSolveJob> FactorGraphFusion::PrepareFullSolve() {
   auto job = std::make_unique<FullSolveJob>();
   job->states_.reserve(nodes_.size());
-  for (const Node& node : nodes_) job->states_.push_back(node.state);
+  for (const Node& node : nodes_) {
+    job->states_.push_back(node.state);
+    job->fixed_.push_back(node.fixed ? 1 : 0);
+  }
   job->factors_.reserve(factors_.size());
   for (const Factor& f : factors_) job->factors_.push_back({f.i, f.j, f.cost, f.loss});
   job->max_iterations_ = options_.full_max_iterations;
   job->num_factors_at_snapshot_ = num_factors();
   full_solve_requested_ = false;
-  nodes_at_last_full_solve_ = num_nodes();
+  nodes_at_last_full_solve_ = counters_.nodes;
+  job_outstanding_ = true;
   return job;
 }
 
@@ -598,8 +671,11 @@ void FullSolveJob::Run() {
                                states_[f.j].data());
     }
   }
-  for (Eigen::Vector3d& s : states_) {
-    if (problem.HasParameterBlock(s.data())) problem.SetManifold(s.data(), &manifold);
+  for (size_t k = 0; k < states_.size(); ++k) {
+    double* s = states_[k].data();
+    if (!problem.HasParameterBlock(s)) continue;
+    problem.SetManifold(s, &manifold);
+    if (k < fixed_.size() && fixed_[k]) problem.SetParameterBlockConstant(s);
   }
   ceres::Solver::Options options;
   options.max_num_iterations = max_iterations_;
@@ -617,6 +693,7 @@ void FullSolveJob::Run() {
 }
 
 void FactorGraphFusion::ApplyFullSolve(const FullSolveJob& job) {
+  job_outstanding_ = false;
   const int solved = static_cast<int>(job.states_.size());
   if (!job.summary_.ran || solved == 0 || solved > num_nodes()) return;
   if (job.summary_.termination == "FAILURE") return;
@@ -626,7 +703,9 @@ void FactorGraphFusion::ApplyFullSolve(const FullSolveJob& job) {
     const Pose2 rel = old_anchor.between(ToPose2(nodes_[k].state));
     nodes_[k].state = ToVector(new_anchor * rel);
   }
-  for (int k = 0; k < solved; ++k) nodes_[k].state = job.states_[k];
+  for (int k = 0; k < solved; ++k) {
+    if (!nodes_[k].fixed) nodes_[k].state = job.states_[k];
+  }
   FillUnconstrained(0);
   ++counters_.full_solves;
   last_summary_ = job.summary_;
@@ -636,13 +715,13 @@ void FactorGraphFusion::FillUnconstrained(int first) {
   const int n = num_nodes();
   int k = std::max(first, 1);
   while (k < n) {
-    if (!nodes_[k].factors.empty()) {
+    if (!nodes_[k].factors.empty() || nodes_[k].fixed) {
       ++k;
       continue;
     }
     // A run [k, m) of nodes without factors, between constrained nodes a = k-1 and b = m.
     int m = k;
-    while (m < n && nodes_[m].factors.empty()) ++m;
+    while (m < n && nodes_[m].factors.empty() && !nodes_[m].fixed) ++m;
     const Node& a = nodes_[k - 1];
     for (int q = k; q < m; ++q) {
       const Pose2 fwd = ToPose2(a.state) * a.T_map_base_rbpf.between(nodes_[q].T_map_base_rbpf);
@@ -677,25 +756,144 @@ bool FactorGraphFusion::Latest(TrajectoryPoint* out) const {
 }
 
 bool FactorGraphFusion::PoseAt(Utime t, Pose2* T_map_base) const {
-  if (nodes_.empty() || t < nodes_.front().utime || t > nodes_.back().utime) return false;
-  const auto it = std::lower_bound(nodes_.begin(), nodes_.end(), t,
-                                   [](const Node& n, Utime time) { return n.utime < time; });
-  if (it->utime == t) {
-    *T_map_base = ToPose2(it->state);
+  if (nodes_.empty()) return false;
+  // The trajectory: the retired nodes (frozen), then the active nodes.
+  const int r = static_cast<int>(retired_.size());
+  const int size = TimelineSize();
+  auto utime = [&](int k) { return TimelineUtime(k); };
+  auto pose = [&](int k) {
+    return k < r ? retired_[k].T_map_base : ToPose2(nodes_[num_fixed_ + k - r].state);
+  };
+  if (t < utime(0) || t > utime(size - 1)) return false;
+  int lo = 0, hi = size;
+  while (lo < hi) {
+    const int mid = lo + (hi - lo) / 2;
+    if (utime(mid) < t)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  if (utime(lo) == t) {
+    *T_map_base = pose(lo);
     return true;
   }
-  const Node& a = *(it - 1);
-  const Node& b = *it;
-  const double alpha = static_cast<double>(t - a.utime) / static_cast<double>(b.utime - a.utime);
-  *T_map_base = Interpolate(ToPose2(a.state), ToPose2(b.state), alpha);
+  const Utime ta = utime(lo - 1), tb = utime(lo);
+  const double alpha = static_cast<double>(t - ta) / static_cast<double>(tb - ta);
+  *T_map_base = Interpolate(pose(lo - 1), pose(lo), alpha);
   return true;
 }
 
 std::vector<TrajectoryPoint> FactorGraphFusion::Trajectory() const {
   std::vector<TrajectoryPoint> out;
-  out.reserve(nodes_.size());
-  for (const Node& n : nodes_) out.push_back({n.utime, ToPose2(n.state)});
+  out.reserve(retired_.size() + nodes_.size());
+  for (const RetiredNode& d : retired_) out.push_back({d.utime, d.T_map_base});
+  for (int k = num_fixed_; k < num_nodes(); ++k) {
+    out.push_back({nodes_[k].utime, ToPose2(nodes_[k].state)});
+  }
   return out;
+}
+
+void FactorGraphFusion::RetireOldNodes() {
+  if (options_.active_window_s <= 0.0 || job_outstanding_ || nodes_.empty()) return;
+  const int n = num_nodes();
+  const int first = num_fixed_;
+  const Utime cutoff = nodes_.back().utime - SecondsToUtime(options_.active_window_s);
+  constexpr double kBatchS = 10.0;  // each retirement rebuilds the graph's indices
+  if (first >= n || nodes_[first].utime >= cutoff - SecondsToUtime(kBatchS)) return;
+  // Never the newest max_window_nodes (a late factor's window), nor a node whose odometry
+  // pair is still open.
+  const int limit = std::min({n - options_.max_window_nodes,
+                              options_.use_wheel_odometry ? next_odom_pair_ - 1 : n, n - 1});
+  int end = first;
+  while (end < limit && nodes_[end].utime < cutoff) ++end;
+  if (end == first) return;
+
+  // 1. Each retired node: kept as a map node, or merged into the nearest map node near it.
+  std::vector<int> map_nodes;
+  for (int k = 0; k < first; ++k) map_nodes.push_back(k);
+  std::vector<int> anchor(static_cast<size_t>(n), -1);
+  for (int k = 0; k < n; ++k) anchor[static_cast<size_t>(k)] = k;
+  for (int k = first; k < end; ++k) {
+    Node& node = nodes_[k];
+    const Pose2 p = ToPose2(node.state);
+    int best = -1;
+    double best_d = options_.map_node_spacing_m;
+    for (int m : map_nodes) {
+      const Eigen::Vector3d& q = nodes_[m].state;
+      const double d = std::hypot(q[0] - p.x, q[1] - p.y);
+      if (d <= best_d && std::fabs(WrapAngle(q[2] - p.theta)) <= options_.map_node_spacing_rad) {
+        best = m;
+        best_d = d;
+      }
+    }
+    if (best < 0) {
+      node.fixed = true;
+      map_nodes.push_back(k);
+    } else {
+      anchor[static_cast<size_t>(k)] = best;
+      ++counters_.merged_nodes;
+    }
+    retired_.push_back(
+        {node.utime, p, node.T_map_base_rbpf, nodes_[anchor[static_cast<size_t>(k)]].utime});
+    ++counters_.retired_nodes;
+  }
+  // 2. New indices: the map nodes (old, then new, in time order), then the active nodes.
+  std::vector<int> index(static_cast<size_t>(n), -1);
+  int next = 0;
+  for (int k = 0; k < n; ++k) {
+    if (k >= end || nodes_[k].fixed) index[static_cast<size_t>(k)] = next++;
+  }
+  // 3. Factors: merged ends re-anchored onto their map node; all-fixed factors dropped.
+  std::vector<Factor> factors;
+  factors.reserve(factors_.size());
+  for (Factor& f : factors_) {
+    const int ai = anchor[static_cast<size_t>(f.i)];
+    const int aj = f.j < 0 ? -1 : anchor[static_cast<size_t>(f.j)];
+    const bool fixed_i = nodes_[ai].fixed;
+    const bool fixed_j = aj < 0 || nodes_[aj].fixed;
+    if ((fixed_i && fixed_j) || ai == aj) {
+      ++counters_.retired_factors;
+      continue;
+    }
+    if (ai != f.i || aj != f.j) {
+      // T_a_i = T_map_a^-1 T_map_i (both frozen); Z' = T_ai_i Z T_j_aj.
+      const Pose2 P = ToPose2(nodes_[ai].state).between(ToPose2(nodes_[f.i].state));
+      const Pose2 Q = ToPose2(nodes_[f.j].state).between(ToPose2(nodes_[aj].state));
+      const Eigen::Matrix3d information = TransformBetweenInformation(f.information, P, f.T_i_j, Q);
+      Eigen::Matrix3d sqrt_info;
+      if (!SqrtInformation<3>(information, &sqrt_info)) {
+        ++counters_.retired_factors;
+        continue;
+      }
+      f.T_i_j = P * f.T_i_j * Q;
+      f.information = information;
+      f.cost.reset(Se2BetweenCost::Create(f.T_i_j, sqrt_info));
+      ++counters_.reanchored_factors;
+    }
+    f.i = index[static_cast<size_t>(ai)];
+    f.j = aj < 0 ? -1 : index[static_cast<size_t>(aj)];
+    factors.push_back(std::move(f));
+  }
+  // 4. The nodes, their factor lists and the indices that point into them.
+  std::deque<Node> nodes;
+  for (int k = 0; k < n; ++k) {
+    if (index[static_cast<size_t>(k)] < 0) continue;
+    nodes.push_back(std::move(nodes_[k]));
+    nodes.back().factors.clear();
+  }
+  for (int fi = 0; fi < static_cast<int>(factors.size()); ++fi) {
+    nodes[factors[fi].i].factors.push_back(fi);
+    if (factors[fi].j >= 0) nodes[factors[fi].j].factors.push_back(fi);
+  }
+  if (options_.use_wheel_odometry) {
+    next_odom_pair_ = index[static_cast<size_t>(next_odom_pair_ - 1)] + 1;
+  }
+  if (oldest_touched_node_ >= 0) {
+    oldest_touched_node_ = index[static_cast<size_t>(std::max(oldest_touched_node_, end))];
+  }
+  num_fixed_ = static_cast<int>(map_nodes.size());
+  nodes_ = std::move(nodes);
+  factors_ = std::move(factors);
 }
 
 }  // namespace fl::fusion

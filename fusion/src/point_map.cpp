@@ -46,6 +46,7 @@ pcl::PointCloud<pcl::PointXYZ>::Ptr VoxelFilter(const pcl::PointCloud<pcl::Point
 
 struct PointMap::Impl {
   std::map<Utime, pcl::PointCloud<pcl::PointXYZ>::Ptr> keyframes;  // base frame
+  std::map<Utime, Pose2> final_poses;  // kept keyframes whose pose is final
   int64_t points = 0;
 };
 
@@ -55,6 +56,9 @@ Status PointMapOptions::Validate() const {
   }
   if (!(max_range_m > 0.0)) return Status::Error("max_range_m must be > 0");
   if (max_points < 1) return Status::Error("max_points must be >= 1");
+  if (!(merge_spacing_m >= 0.0) || !(merge_spacing_rad > 0.0 && merge_spacing_rad <= M_PI)) {
+    return Status::Error("merge_spacing_m must be >= 0 m and merge_spacing_rad in (0, pi] rad");
+  }
   return Status::Ok();
 }
 
@@ -118,6 +122,45 @@ std::vector<Eigen::Vector3f> PointMap::Build(const std::function<bool(Utime, Pos
   out.reserve(filtered->size());
   for (const auto& p : filtered->points) out.emplace_back(p.x, p.y, p.z);
   return out;
+}
+
+int PointMap::MergeFinalKeyframes(const std::function<bool(Utime, Pose2*)>& pose_at,
+                                  Utime final_until) {
+  if (options_.merge_spacing_m <= 0.0) return 0;
+  int merged = 0;
+  for (auto it = impl_->keyframes.begin();
+       it != impl_->keyframes.end() && it->first <= final_until;) {
+    if (impl_->final_poses.count(it->first)) {
+      ++it;
+      continue;
+    }
+    Pose2 T_map_k;
+    if (!pose_at(it->first, &T_map_k) || !std::isfinite(T_map_k.x) || !std::isfinite(T_map_k.y) ||
+        !std::isfinite(T_map_k.theta)) {
+      ++it;  // no pose (yet): left as it is
+      continue;
+    }
+    bool found = false;
+    for (const auto& [utime, T_map_m] : impl_->final_poses) {
+      if (std::hypot(T_map_m.x - T_map_k.x, T_map_m.y - T_map_k.y) <= options_.merge_spacing_m &&
+          std::fabs(WrapAngle(T_map_m.theta - T_map_k.theta)) <= options_.merge_spacing_rad) {
+        found = true;
+        break;
+      }
+    }
+    if (!found) {
+      impl_->final_poses.emplace(it->first, T_map_k);
+      ++it;
+      continue;
+    }
+    // The kept keyframe already holds this view. (Moving k's points into it instead made the
+    // map grow by ~20k points a minute in a looping soak: stereo noise fills new voxels.)
+    impl_->points -= static_cast<int64_t>(it->second->size());
+    it = impl_->keyframes.erase(it);
+    ++merged;
+  }
+  merged_keyframes_ += merged;
+  return merged;
 }
 
 int PointMap::num_keyframes() const { return static_cast<int>(impl_->keyframes.size()); }

@@ -3,9 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <memory>
 #include <random>
 
 #include "fusion_fixtures.hpp"
+#include "fusionloc/common/se2_between_cost.hpp"
+#include "fusionloc/common/sqrt_information.hpp"
 
 namespace fl::fusion {
 namespace {
@@ -16,7 +19,7 @@ using fl::test::MakeRoundedSquareSim;
 
 FusionOptions TestOptions() {
   FusionOptions o;
-  o.full_solve_every_n_nodes = 0;  // the tests decide when to solve
+  o.full_solve_every_n_nodes = 0;   // the tests decide when to solve
   o.laser_chain_factors = "never";  // tested on its own (the fixtures' RBPF poses drift)
   o.use_wheel_odometry = false;     // likewise
   return o;
@@ -339,7 +342,7 @@ TEST(FusionFactorGraph, WheelOdometryOutweighsASlidingRbpfAlongACorridor) {
     const Utime t0 = 1000000;
     for (int k = 0; k <= 200; ++k) {
       const Utime t = t0 + k * 100000;
-      EXPECT_TRUE(fusion.AddOdometry(t, Pose2(0.05 * k, 0.0, 0.0)).ok());  // 0.5 m/s, exact
+      EXPECT_TRUE(fusion.AddOdometry(t, Pose2(0.05 * k, 0.0, 0.0)).ok());   // 0.5 m/s, exact
       EXPECT_TRUE(fusion.AddLaserPose(t, Pose2(0.04 * k, 0.0, 0.0)).ok());  // slides
       if (k > 0 && k % 10 == 0) {  // keyframe ICP factor: sure across, unsure along x
         RelativePoseFactor f;
@@ -554,6 +557,146 @@ TEST(FusionFactorGraph, NewestNodeCovarianceAddsPriorAndChainNoise) {
   EXPECT_NEAR(c(0, 0), o.prior_sigma_xy * o.prior_sigma_xy + sxy * sxy, 1e-9);
   EXPECT_NEAR(c(2, 2), o.prior_sigma_theta * o.prior_sigma_theta + sth * sth, 1e-9);
   EXPECT_NEAR(c(0, 1), 0.0, 1e-12);
+}
+
+// Feeds laser poses and factors (laser, vision) in time order; a full solve whenever one is
+// requested. Returns the graph's size after each lap (nodes per lap: lap_nodes).
+std::vector<int> RunWithFullSolves(const FusionSimData& d, FactorGraphFusion* fusion,
+                                   size_t lap_nodes) {
+  std::vector<int> sizes;
+  size_t lf = 0, vf = 0;
+  for (size_t k = 0; k < d.rbpf.size(); ++k) {
+    EXPECT_TRUE(fusion->AddLaserPose(d.rbpf[k].utime, d.rbpf[k].T_map_base).ok());
+    while (lf < d.laser_factors.size() && d.laser_factors[lf].utime_j <= d.rbpf[k].utime) {
+      EXPECT_TRUE(fusion->AddFactor(d.laser_factors[lf++]).ok());
+    }
+    while (vf < d.vision_factors.size() && d.vision_factors[vf].utime_j <= d.rbpf[k].utime) {
+      EXPECT_TRUE(fusion->AddFactor(d.vision_factors[vf++]).ok());
+    }
+    fusion->Update();
+    if (fusion->full_solve_requested()) fusion->FullSolve();
+    if ((k + 1) % lap_nodes == 0) sizes.push_back(fusion->num_nodes());
+  }
+  return sizes;
+}
+
+TEST(FusionFactorGraph, ReanchoredInformationKeepsTheCost) {
+  // Z' = P Z Q between anchors a = i P^-1 and b = j Q has, with Omega' from
+  // TransformBetweenInformation, the cost of Z between i and j (to first order).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 20; ++trial) {
+    const Pose2 T_i(u(rng) * 5, u(rng) * 5, u(rng) * 3);
+    const Pose2 Z(u(rng) * 2, u(rng) * 2, u(rng));
+    const Pose2 T_j = T_i * Z * Pose2(1e-3 * u(rng), 1e-3 * u(rng), 1e-3 * u(rng));
+    const Pose2 P(u(rng), u(rng), u(rng) * 0.5), Q(u(rng), u(rng), u(rng) * 0.5);
+    const Pose2 T_a = T_i * P.inverse(), T_b = T_j * Q;
+    Eigen::Matrix3d a = Eigen::Matrix3d::Identity() + 0.3 * Eigen::Matrix3d::Random();
+    const Eigen::Matrix3d info = a * a.transpose() * 1e4;
+    const Eigen::Matrix3d info2 = TransformBetweenInformation(info, P, Z, Q);
+    auto cost = [](const Pose2& meas, const Eigen::Matrix3d& omega, const Pose2& x_i,
+                   const Pose2& x_j) {
+      Eigen::Matrix3d s;
+      EXPECT_TRUE(SqrtInformation<3>(omega, &s));
+      std::unique_ptr<ceres::CostFunction> c(Se2BetweenCost::Create(meas, s));
+      const double pi[3] = {x_i.x, x_i.y, x_i.theta}, pj[3] = {x_j.x, x_j.y, x_j.theta};
+      const double* params[2] = {pi, pj};
+      double r[3];
+      c->Evaluate(params, r, nullptr);
+      return r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+    };
+    const double c1 = cost(Z, info, T_i, T_j);
+    const double c2 = cost(P * Z * Q, info2, T_a, T_b);
+    EXPECT_NEAR(c2, c1, 0.02 * c1 + 1e-6) << trial;
+  }
+}
+
+TEST(FusionFactorGraph, BoundedGraphStopsGrowingOnceTheRouteIsMapped) {
+  // 20 laps of the square, exact measurements: with a 30 s active window the graph holds the
+  // window plus the map nodes of one lap, every pose is still in the trajectory, exact.
+  FusionSimOptions so;
+  so.laps = 20;
+  so.loop_closure = false;
+  so.vision_offset_s = 0.0;  // see SquareWithLoopClosureConvergesToTruth
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  const size_t lap_nodes = d.rbpf.size() / 20;
+  FusionOptions o = TestOptions();
+  o.active_window_s = 30.0;
+  o.max_window_nodes = 100;
+  o.full_solve_every_n_nodes = 100;
+  FactorGraphFusion fusion(o);
+  const std::vector<int> sizes = RunWithFullSolves(d, &fusion, lap_nodes);
+  ASSERT_EQ(sizes.size(), 20u);
+  // Window: 300-400 nodes; map nodes: about one per metre of the 22.6 m lap.
+  // (Retired in batches of 10 s: the size saw-tooths by ~100 nodes.)
+  const int early = *std::max_element(sizes.begin() + 1, sizes.begin() + 5);
+  const int late = *std::max_element(sizes.begin() + 10, sizes.end());
+  EXPECT_LT(late, 500);
+  EXPECT_LE(late, early + 5) << "largest in laps 2-5: " << early << ", in laps 11-20: " << late;
+  EXPECT_GT(fusion.num_map_nodes(), 10);
+  EXPECT_LT(fusion.num_map_nodes(), 60);
+  EXPECT_GT(fusion.counters().merged_nodes, fusion.counters().retired_nodes / 2);
+  EXPECT_GT(fusion.counters().reanchored_factors, 0);
+  const auto traj = fusion.Trajectory();
+  ASSERT_EQ(traj.size(), d.truth.size());
+  EXPECT_LT(MaxError(traj, d.truth), 1e-3);
+  Pose2 p;
+  const size_t old = lap_nodes + 7;  // retired long ago
+  ASSERT_TRUE(fusion.PoseAt(d.truth[old].utime + 30000, &p));
+  EXPECT_LT(
+      PositionError(p, Interpolate(d.truth[old].T_map_base, d.truth[old + 1].T_map_base, 0.3)),
+      1e-3);
+
+  // A late loop closure from the newest node to a retired time attaches (onto the map node
+  // of that place) and keeps the graph exact; one between two retired times changes nothing.
+  const int64_t rejected = fusion.counters().rejected_total();
+  const int64_t added = fusion.counters().factors_added;
+  RelativePoseFactor loop;
+  loop.utime_i = d.truth.back().utime;
+  loop.utime_j = d.truth[old].utime;
+  loop.T_i_j = d.truth.back().T_map_base.between(d.truth[old].T_map_base).ToIsometry3();
+  loop.information.diagonal() << 1e4, 1e4, 0, 0, 0, 1e5;
+  loop.is_loop_closure = true;
+  ASSERT_TRUE(fusion.AddFactor(loop).ok());
+  EXPECT_EQ(fusion.counters().factors_added, added + 1);
+  RelativePoseFactor past = loop;
+  past.utime_i = d.truth[old + 50].utime;
+  past.T_i_j = d.truth[old + 50].T_map_base.between(d.truth[old].T_map_base).ToIsometry3();
+  const int64_t retired_factors = fusion.counters().retired_factors;
+  ASSERT_TRUE(fusion.AddFactor(past).ok());
+  EXPECT_EQ(fusion.counters().retired_factors, retired_factors + 1);
+  EXPECT_EQ(fusion.counters().rejected_total(), rejected);
+  fusion.FullSolve();
+  EXPECT_LT(MaxError(fusion.Trajectory(), d.truth), 1e-3);
+}
+
+TEST(FusionFactorGraph, BoundedGraphIsAsAccurateAsTheFullOneOnNoisyData) {
+  // Noisy laser and vision factors, 8 laps, several seeds: the bounded graph (30 s window)
+  // against keeping every node.
+  for (unsigned seed = 1; seed <= 3; ++seed) {
+    FusionSimOptions so;
+    so.laps = 8;
+    so.seed = seed;
+    so.laser_sigma_xy = 0.01;
+    so.laser_sigma_theta = 0.003;
+    so.vision_sigma_xy = 0.02;
+    so.vision_sigma_theta = 0.005;
+    const FusionSimData d = MakeRoundedSquareSim(so);
+    FusionOptions o = TestOptions();
+    o.full_solve_every_n_nodes = 100;
+    o.max_window_nodes = 100;
+    o.active_window_s = 0.0;
+    FactorGraphFusion full(o);
+    RunWithFullSolves(d, &full, d.rbpf.size());
+    o.active_window_s = 30.0;
+    FactorGraphFusion bounded(o);
+    RunWithFullSolves(d, &bounded, d.rbpf.size());
+    EXPECT_LT(bounded.num_nodes(), full.num_nodes() / 3);
+    const double e_full = RmsError(full.Trajectory(), d.truth);
+    const double e_bounded = RmsError(bounded.Trajectory(), d.truth);
+    EXPECT_LT(e_bounded, 1.5 * e_full + 0.02)
+        << "seed " << seed << ": full " << e_full << " m, bounded " << e_bounded << " m";
+  }
 }
 
 TEST(FusionFactorGraph, OptionsValidateWithClearErrors) {

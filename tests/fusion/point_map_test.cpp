@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 
 namespace fl::fusion {
 namespace {
@@ -78,6 +79,55 @@ TEST(FusionPointMap, BadPointsAndDuplicateKeyframesAreRejected) {
   bad.voxel_size_m = 0.0;
   EXPECT_FALSE(bad.Validate().ok());
   EXPECT_THROW(PointMap m(bad), std::invalid_argument);
+}
+
+TEST(FusionPointMap, FinalKeyframesOfAMappedViewAreDroppedAndTheMapStaysTheSame) {
+  // Three laps of a 4 m circle, a keyframe every 0.2 m, each seeing the same 4 walls: once
+  // final, about one lap of keyframes is left, and the built map is the same.
+  PointMapOptions o;
+  o.voxel_size_m = 0.1;
+  PointMap merged(o), all(o);
+  std::map<Utime, Pose2> poses;
+  const double r = 4.0 / (2 * M_PI);
+  const int per_lap = 20;
+  for (int k = 0; k < 3 * per_lap; ++k) {
+    const double a = 2 * M_PI * k / per_lap;
+    const Pose2 T_map_base(r * std::sin(a), r * (1 - std::cos(a)), a);
+    const Utime t = 1000 + 100 * k;
+    poses[t] = T_map_base;
+    // The walls x = +-3.03, y = +-3.03 of the map (off the voxel boundaries), in the base frame.
+    std::vector<Eigen::Vector3f> points;
+    for (int q = -30; q <= 30; ++q) {
+      const double v = 0.1 * q + 0.03;
+      for (const Eigen::Vector2d& w : {Eigen::Vector2d(3.03, v), Eigen::Vector2d(-3.03, v),
+                                       Eigen::Vector2d(v, 3.03), Eigen::Vector2d(v, -3.03)}) {
+        const Pose2 local = T_map_base.inverse() * Pose2(w.x(), w.y(), 0);
+        points.emplace_back(local.x, local.y, 0.5f);
+      }
+    }
+    ASSERT_TRUE(merged.AddKeyframe(t, points).ok());
+    ASSERT_TRUE(all.AddKeyframe(t, points).ok());
+  }
+  auto pose_at = [&](Utime t, Pose2* p) {
+    *p = poses.at(t);
+    return true;
+  };
+  // Nothing is final yet: nothing merges.
+  EXPECT_EQ(merged.MergeFinalKeyframes(pose_at, 0), 0);
+  const int n = merged.MergeFinalKeyframes(pose_at, 1000 + 100 * 3 * per_lap);
+  EXPECT_GT(n, per_lap);  // laps 2 and 3 merged (the first lap's keyframes 0.2 m apart too)
+  EXPECT_EQ(merged.merged_keyframes(), n);
+  EXPECT_LE(merged.num_keyframes(), per_lap);
+  EXPECT_LT(merged.stored_points(), all.stored_points() / 2);
+  const auto a = all.Build(pose_at), b = merged.Build(pose_at);
+  ASSERT_FALSE(a.empty());
+  EXPECT_NEAR(static_cast<double>(b.size()), static_cast<double>(a.size()), 0.05 * a.size());
+  // Every merged-map point is on a wall.
+  for (const auto& p : b) {
+    const float d =
+        std::min(std::fabs(std::fabs(p.x()) - 3.03f), std::fabs(std::fabs(p.y()) - 3.03f));
+    EXPECT_LT(d, 0.1f) << p.transpose();
+  }
 }
 
 }  // namespace

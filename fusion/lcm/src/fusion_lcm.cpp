@@ -6,10 +6,10 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/maps/map_export.hpp"
 #include "fusionloc/status_t.hpp"
@@ -121,7 +121,8 @@ FusionNode::FusionNode(const FusionProcessConfig& config, const FusionNodeOption
   for (const char* ch : {channels::kRbpfFactors, channels::kVoFactors}) {
     const std::string channel = channels(ch);
     Handle<fusionloc::relative_pose_factor_t>(
-        channel, [this, channel](const fusionloc::relative_pose_factor_t& m) { OnFactor(m, channel); });
+        channel,
+        [this, channel](const fusionloc::relative_pose_factor_t& m) { OnFactor(m, channel); });
   }
   Handle<fusionloc::wheel_odometry_t>(
       ch_odometry_, [this](const fusionloc::wheel_odometry_t& m) { OnOdometry(m); });
@@ -182,8 +183,8 @@ void FusionNode::RestoreFromJournal() {
         LcmLogEvent e;
         while (reader.Next(&e)) events.push_back(std::move(e));
         if (!reader.ProblemSummary().empty()) {
-          FL_LOG(WARN) << "journal " << path << ": " << reader.ProblemSummary()
-                       << "; the " << events.size() << " whole inputs before it are used";
+          FL_LOG(WARN) << "journal " << path << ": " << reader.ProblemSummary() << "; the "
+                       << events.size() << " whole inputs before it are used";
         }
       } catch (const std::exception& ex) {
         FL_LOG(WARN) << "journal " << path << " unreadable (" << ex.what()
@@ -347,6 +348,11 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   status_.Set("odometry_gaps", static_cast<double>(fusion_.counters().odometry_gaps));
   status_.Set("chain_factors", static_cast<double>(fusion_.counters().chain_factors));
   status_.Set("map_keyframes", map_.num_keyframes());
+  status_.Set("map_keyframes_merged", static_cast<double>(map_.merged_keyframes()));
+  status_.Set("map_points", static_cast<double>(map_.stored_points()));
+  status_.Set("map_nodes", fusion_.num_map_nodes());
+  status_.Set("retired_nodes", static_cast<double>(fusion_.num_retired_nodes()));
+  status_.Set("reanchored_factors", static_cast<double>(fusion_.counters().reanchored_factors));
   if (u.ran) {
     status_.SetState(fusionloc::status_t::LEVEL_OK,
                      u.ToString(with_time_) +
@@ -410,6 +416,9 @@ void FusionNode::OnPoints(const fusionloc::point_cloud_t& m) {
   for (auto& p : points) p = T_base_frame * p;
   const Status s = map_.AddKeyframe(m.utime, points);
   if (!s.ok()) status_.CountDropped(s.message());
+  // Keyframes of the frozen past in a region already mapped merge (bounded memory).
+  map_.MergeFinalKeyframes([this](Utime t, Pose2* p) { return fusion_.PoseAt(t, p); },
+                           fusion_.final_until());
 }
 
 void FusionNode::PublishPose() {

@@ -23,8 +23,8 @@
 // ASYNCHRONOUS SENSORS / TIME ATTACHMENT: nodes exist at laser times (10 Hz); a factor's
 // times utime_i, utime_j (e.g. 2 Hz vision keyframes) are attached to the NEAREST node if it
 // is within attach_tolerance_s, or, when laser scans were lost, to the nearer of the two nodes
-// around it if they are at most attach_max_gap_s apart; the time offset between the factor time t and its node
-// time n is then corrected by INTERPOLATING the RBPF poses of the two nodes around t:
+// around it if they are at most attach_max_gap_s apart; the time offset between the factor time t
+// and its node time n is then corrected by INTERPOLATING the RBPF poses of the two nodes around t:
 //     T_n_t = T_rbpf(n)^-1 * Interp(T_rbpf(a), T_rbpf(b), (t - a) / (b - a))
 //     Interp(A, B, s) = A * Exp(s * Log(A^-1 B))   (SE(2) constant-velocity arc)
 //     measurement used:  T_ni_nj = T_ni_ti * T_ti_tj * T_tj_nj
@@ -66,6 +66,26 @@
 // Nodes that no factor touches (e.g. laser scans between RBPF keyframes while no vision
 // factor arrives) are not optimised: after each solve they are placed by the RBPF's relative
 // motion from the constrained nodes on both sides, blended linearly in time.
+//
+// BOUNDED GRAPH (a robot that runs for hours): nodes older than active_window_s behind the
+// newest leave the optimised graph, in batches of 10 s of nodes (never while a full-solve job
+// is out, never the newest max_window_nodes nodes, never a node whose odometry pair is still
+// open). Their fused poses are frozen into the retired trajectory (Trajectory(), PoseAt()
+// still give every node). A retired node is kept as a FIXED MAP NODE unless a map node already
+// lies within map_node_spacing_m and map_node_spacing_rad of it (a region already mapped);
+// then it is merged into the nearest such map node: every factor between it and an active
+// node is re-anchored onto the map node,
+//     T_a_j = T_a_d * T_d_j    (T_a_d = T_map_a^-1 T_map_d, both frozen: exact),
+// and a factor whose ends are all fixed (no longer able to move anything) is dropped. The
+// map nodes are held constant in every solve and give the gauge once the first node has
+// retired; late factors whose times are retired attach to the retired node of their time,
+// re-anchored onto its map node. So the graph holds the active window plus at most one map
+// node per spacing cell of the area driven: it stops growing once the route is mapped. What
+// it gives up: a loop closure corrects the active window, not the frozen past.
+// INFORMATION UNDER RE-ANCHORING: with e the between-cost error (in frame i) of Z and
+// Z' = P Z Q (P, Q exact), e' = A e to first order, A = [R_P, R_P R_Z perp(t_Q); 0 0 1]
+// (perp(x, y) = (-y, x)), so Omega' = A^-T Omega A^-1 (also for the time-offset corrections
+// of ASYNCHRONOUS SENSORS above).
 //
 // Thread safety: one thread uses the object; only FullSolveJob::Run() may run elsewhere.
 #pragma once
@@ -135,6 +155,11 @@ struct FusionOptions {
                                             // newest node is this much newer is a gap
   int max_pending_factors = 1000;           // factors waiting for their laser node; oldest dropped
   bool compute_covariance = true;           // marginal covariance of the newest node per Update()
+  // Bounded graph (see the file comment):
+  double active_window_s = 300.0;     // [s] nodes older than this leave the optimised graph
+                                      // (0: keep every node; the graph grows with time)
+  double map_node_spacing_m = 1.0;    // [m] a retired node within this distance ...
+  double map_node_spacing_rad = 0.5;  // [rad] ... and heading of a map node merges into it
 
   template <class A>
   void Serialize(A* a) {
@@ -165,6 +190,9 @@ struct FusionOptions {
     a->Visit("odom_max_latency_s", &odom_max_latency_s);
     a->Visit("max_pending_factors", &max_pending_factors);
     a->Visit("compute_covariance", &compute_covariance);
+    a->Visit("active_window_s", &active_window_s);
+    a->Visit("map_node_spacing_m", &map_node_spacing_m);
+    a->Visit("map_node_spacing_rad", &map_node_spacing_rad);
   }
   Status Validate() const;
 };
@@ -201,6 +229,10 @@ struct FusionCounters {
   int64_t chain_factors = 0;             // RBPF pose-chain factors added
   int64_t full_solves = 0;
   int64_t updates = 0;
+  int64_t retired_nodes = 0;       // nodes that left the optimised graph (bounded graph)
+  int64_t merged_nodes = 0;        // ... of which merged into a map node (not kept)
+  int64_t reanchored_factors = 0;  // factors moved from a merged node onto its map node
+  int64_t retired_factors = 0;     // factors dropped: all their ends fixed
   int64_t rejected_total() const {
     return rejected_node_time + rejected_non_finite + rejected_information + rejected_no_node +
            rejected_same_node + dropped_pending_overflow + rejected_odometry;
@@ -229,6 +261,7 @@ class FullSolveJob {
     std::shared_ptr<ceres::LossFunction> loss;
   };
   std::vector<Eigen::Vector3d> states_;
+  std::vector<char> fixed_;  // map nodes: held constant
   std::vector<JobFactor> factors_;
   int max_iterations_ = 50;
   int num_factors_at_snapshot_ = 0;
@@ -271,7 +304,12 @@ class FactorGraphFusion {
   bool PoseAt(Utime utime, Pose2* T_map_base) const;
   std::vector<TrajectoryPoint> Trajectory() const;
 
+  // Nodes in the graph: the fixed map nodes and the active window.
   int num_nodes() const { return static_cast<int>(nodes_.size()); }
+  int num_map_nodes() const { return num_fixed_; }
+  int64_t num_retired_nodes() const { return static_cast<int64_t>(retired_.size()); }
+  // Poses at or before this time are final (retired, frozen); 0 while nothing is retired.
+  Utime final_until() const { return retired_.empty() ? 0 : retired_.back().utime; }
   int num_factors() const { return static_cast<int>(factors_.size()); }
   int num_pending_factors() const { return static_cast<int>(pending_.size()); }
   const FusionCounters& counters() const { return counters_; }
@@ -284,6 +322,14 @@ class FactorGraphFusion {
     Pose2 T_map_base_rbpf;  // input pose (for initialisation/interpolation)
     Eigen::Vector3d state = Eigen::Vector3d::Zero();  // fused T_map_base (x, y, theta)
     std::vector<int> factors;                         // indices into factors_
+    bool fixed = false;                               // a map node (retired, constant)
+  };
+  // A node that left the optimised graph, its fused pose frozen.
+  struct RetiredNode {
+    Utime utime = 0;
+    Pose2 T_map_base;        // fused, frozen
+    Pose2 T_map_base_rbpf;   // input pose (interpolation of late factor times)
+    Utime anchor_utime = 0;  // the map node it is kept as or merged into
   };
   struct Factor {
     int i = -1, j = -1;  // node indices; j = -1 for the prior
@@ -323,6 +369,14 @@ class FactorGraphFusion {
   // Nodes (from `first` on) that no factor touches are placed by the RBPF's relative motion
   // from the constrained nodes before and after them (blended linearly in time).
   void FillUnconstrained(int first);
+  // Bounded graph: retires the nodes older than active_window_s (see the file comment).
+  void RetireOldNodes();
+  // The input poses in time order: the retired nodes, then the active nodes.
+  int TimelineSize() const;
+  Utime TimelineUtime(int k) const;
+  const Pose2& TimelineRbpf(int k) const;
+  // The graph node and T_node_k of timeline entry k (a retired one: its map node).
+  void TimelineNode(int k, int* node, Pose2* T_node_k) const;
 
   FusionOptions options_;
   std::deque<Node> nodes_;
@@ -332,7 +386,10 @@ class FactorGraphFusion {
   int next_odom_pair_ = 1;        // next node j needing an odometry factor (j-1, j)
   int oldest_touched_node_ = -1;  // oldest node touched by factors since last Update
   bool full_solve_requested_ = false;
-  int nodes_at_last_full_solve_ = 0;
+  int64_t nodes_at_last_full_solve_ = 0;  // counters_.nodes at the last full solve
+  std::deque<RetiredNode> retired_;
+  int num_fixed_ = 0;             // nodes_[0, num_fixed_) are the map nodes
+  bool job_outstanding_ = false;  // PrepareFullSolve() ... ApplyFullSolve(): indices held
   Eigen::Matrix3d latest_covariance_ = Eigen::Matrix3d::Zero();
   SolveSummary last_summary_;
   FusionCounters counters_;
@@ -345,6 +402,11 @@ class FactorGraphFusion {
 // Reduces a 6x6 information of [x y z roll pitch yaw] to (x, y, yaw) by marginalisation (see
 // the file comment). False (with a reason) if it is not finite, not symmetric, singular or
 // indefinite.
+// Information of Z' = P Z Q (P, Q exact) from that of Z: A^-T Omega A^-1 (see the file
+// comment, INFORMATION UNDER RE-ANCHORING).
+Eigen::Matrix3d TransformBetweenInformation(const Eigen::Matrix3d& information, const Pose2& P,
+                                            const Pose2& Z, const Pose2& Q);
+
 bool ReduceInformationToPlanar(const Eigen::Matrix<double, 6, 6>& information,
                                Eigen::Matrix3d* planar, std::string* reason);
 

@@ -16,7 +16,8 @@
 // symmetric positive-definite one is accepted, whatever the spread of its entries.
 // Blank lines and lines starting with '#' are skipped. Anything else (an unknown tag, a
 // missing or non-numeric field, a non-finite number, a zero quaternion, an edge to an unknown
-// vertex, an edge from a vertex to itself, a duplicate vertex id, a file mixing 2D and 3D) is an error naming file:line.
+// vertex, an edge from a vertex to itself, a duplicate vertex id, a file mixing 2D and 3D) is an
+// error naming file:line.
 #pragma once
 
 #include <Eigen/Core>

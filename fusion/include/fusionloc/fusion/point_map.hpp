@@ -1,8 +1,10 @@
 // The fusion's 3D map: the VO keyframe points (robot base frame), placed by the FUSED poses
 // and thinned with a voxel filter (PCL VoxelGrid, kept out of this header).
 //
-// Keyframes are stored in their own base frame (each voxel-filtered once on arrival, so memory
-// stays bounded by the scene, not by time); Build() places every keyframe with the current
+// Keyframes are stored in their own base frame (each voxel-filtered once on arrival); once a
+// keyframe's pose is final, one whose view is already mapped (a kept keyframe within the merge
+// spacing) is dropped, so that memory stays bounded by the scene, not by time
+// (MergeFinalKeyframes); Build() places every keyframe with the current
 // fused pose at its time and voxel-filters the union, so the map follows every correction of
 // the trajectory (loop closures included). Planar poses are embedded in 3D as a rotation
 // about z at z = 0.
@@ -23,12 +25,19 @@ struct PointMapOptions {
   double voxel_size_m = 0.05;  // [m] voxel edge of the filter (keyframes and the map)
   double max_range_m = 30.0;   // [m] keyframe points farther from the base are dropped
   int max_points = 5000000;    // map points before Build() refuses (memory guard)
+  // A keyframe whose pose is final (the fusion retired it) is dropped when an older final
+  // keyframe lies within this distance and heading (a view already mapped): memory bounded by
+  // the scene.
+  double merge_spacing_m = 1.0;    // [m] (0: never merge; memory grows with time)
+  double merge_spacing_rad = 0.5;  // [rad]
 
   template <class A>
   void Serialize(A* a) {
     a->Visit("voxel_size_m", &voxel_size_m);
     a->Visit("max_range_m", &max_range_m);
     a->Visit("max_points", &max_points);
+    a->Visit("merge_spacing_m", &merge_spacing_m);
+    a->Visit("merge_spacing_rad", &merge_spacing_rad);
   }
   Status Validate() const;
 };
@@ -53,7 +62,14 @@ class PointMap {
   std::vector<Eigen::Vector3f> Build(const std::function<bool(Utime, Pose2*)>& pose_at,
                                      int* skipped = nullptr) const;
 
+  // Keyframes at or before `final_until` have their final pose pose_at(utime) (the fusion's
+  // frozen past): each one not yet final is kept, or, if a kept final keyframe lies within
+  // merge_spacing_m and merge_spacing_rad of it (that view is already in the map), removed.
+  // Returns the number removed.
+  int MergeFinalKeyframes(const std::function<bool(Utime, Pose2*)>& pose_at, Utime final_until);
+
   int num_keyframes() const;
+  int64_t merged_keyframes() const { return merged_keyframes_; }
   int64_t stored_points() const;
   int64_t dropped_points() const { return dropped_points_; }
 
@@ -62,6 +78,7 @@ class PointMap {
   std::unique_ptr<Impl> impl_;
   PointMapOptions options_;
   int64_t dropped_points_ = 0;
+  int64_t merged_keyframes_ = 0;
 };
 
 }  // namespace fl::fusion
