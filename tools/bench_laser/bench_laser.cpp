@@ -398,9 +398,9 @@ int main(int argc, char** argv) {
   cli.AddFlag("peers-rbpf-slam", &peers_rbpf_slam, "--peers: MRPT's rbpf-slam program");
   cli.AddEpilog(
       "\nRecording (--record FILE.md): the laser section of FILE.md is rewritten with this "
-      "run's table; with --peers the comparison goes to its own section (bench:laser-peers), "
-      "and with --peers --only the laser section is left alone (a table of some logs would "
-      "replace the full one; the JSON is still written).\n");
+      "run's table; with --peers the comparison goes to its own section (bench:laser-peers); "
+      "with --only the laser section is left alone (a table of some logs would replace the "
+      "full one; the JSON is still written).\n");
   if (!program.Parse(argc, argv)) return program.exit_code();
   if (peers) {
     if (peers_rawlog_tool.empty()) {
@@ -860,11 +860,12 @@ int main(int argc, char** argv) {
   }
   if (!std::getenv("FL_BENCH_KEEP_TMP")) fs::remove_all(tmp, ec);
   fl::bench::CommonArgs laser_args = args;
-  if (peers && !only.empty() && !laser_args.record.empty()) {
+  if (!only.empty() && !laser_args.record.empty()) {
     laser_args.record.clear();
-    std::cerr << "fl-bench-laser: --peers --only " << only << ": not recording the laser section "
-              << "of " << args.record << " (it holds the full run; this one covers some logs); "
-              << "the peers' table is recorded in its own section\n";
+    std::cerr << "fl-bench-laser: --only " << only << ": not recording the laser section of "
+              << args.record << " (it holds the full run; this one covers some logs; the JSON "
+              << "is written)" << (peers ? "; the peers' table is recorded in its own section" : "")
+              << "\n";
   }
   fl::bench::Publish(report, laser_args);
   if (peers) {
