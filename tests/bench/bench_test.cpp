@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -97,4 +98,20 @@ TEST(Bench, PeakRssRisesByTheMemoryTouchedAndStays) {
 }
 
 }  // namespace
+TEST(BenchStats, LeastSquaresSlopeAfterTheWarmUp) {
+  // Memory: 10 MB growing 2 MB/min for 5 minutes, then flat at 20 MB with noise +-0.5.
+  std::vector<double> t, y;
+  for (int m = 0; m <= 30; ++m) {
+    t.push_back(m);
+    y.push_back(m < 5 ? 10.0 + 2.0 * m : 20.0 + (m % 2 == 0 ? 0.5 : -0.5));
+  }
+  EXPECT_NEAR(LeastSquaresSlope(t, y, 10.0), 0.0, 0.01);
+  EXPECT_GT(LeastSquaresSlope(t, y), 0.1);  // the warm-up dominates without a cut
+  y[20] = std::nan("");                     // a missing sample is left out
+  EXPECT_NEAR(LeastSquaresSlope(t, y, 10.0), 0.0, 0.02);
+  EXPECT_NEAR(LeastSquaresSlope({0, 1, 2}, {1, 3, 5}), 2.0, 1e-12);
+  EXPECT_TRUE(std::isnan(LeastSquaresSlope({1}, {1})));
+  EXPECT_TRUE(std::isnan(LeastSquaresSlope({1, 1}, {1, 2})));  // no spread in t
+}
+
 }  // namespace fl::bench

@@ -42,7 +42,7 @@ using fl::bench::NowSeconds;
 struct Setup {
   std::string bin, config_dir, out_dir, world = "paper";
   double minutes = 30.0;
-  double warmup_minutes = -1.0;  // < 0: min(5, minutes / 3)
+  double warmup_minutes = -1.0;  // < 0: min(10, minutes / 3)
   double sample_s = 60.0;
   int64_t seed = 1;
   int port = 7660;
@@ -54,22 +54,6 @@ struct SizeSeries {
   std::string channel;  // STATUS_ channel ("" : not from status)
   std::string key;      // status key
 };
-
-// Least-squares slope of (t, y) for t >= t_from, per unit of t; NaN with fewer than 2 points.
-double Slope(const std::vector<double>& t, const std::vector<double>& y, double t_from) {
-  double n = 0, st = 0, sy = 0, stt = 0, sty = 0;
-  for (size_t i = 0; i < t.size(); ++i) {
-    if (t[i] < t_from || !std::isfinite(y[i])) continue;
-    n += 1;
-    st += t[i];
-    sy += y[i];
-    stt += t[i] * t[i];
-    sty += t[i] * y[i];
-  }
-  const double d = n * stt - st * st;
-  if (n < 2 || d <= 0) return std::nan("");
-  return (n * sty - st * sy) / d;
-}
 
 // The value at the first sample with t >= t_from (NaN if none).
 double At(const std::vector<double>& t, const std::vector<double>& y, double t_from) {
@@ -92,7 +76,7 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
     yaml << fl::SaveYamlString(sim);
   }
   const double warmup_s =
-      60.0 * (s.warmup_minutes >= 0 ? s.warmup_minutes : std::min(5.0, s.minutes / 3.0));
+      60.0 * (s.warmup_minutes >= 0 ? s.warmup_minutes : std::min(10.0, s.minutes / 3.0));
   std::filesystem::remove(dir + "/fusion.journal");
 
   const std::string url =
@@ -230,7 +214,7 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
     fl::bench::Run run;
     run.name = p;
     run.input = "world " + s.world + ", " + fl::FormatDouble(s.minutes) + " min real time";
-    const double slope = 10.0 * Slope(sample_t, rss[p], warm_min);
+    const double slope = 10.0 * fl::bench::LeastSquaresSlope(sample_t, rss[p], warm_min);
     run.Add("rss_mb_warm", At(sample_t, rss[p], warm_min))
         .Add("rss_mb_end", rss[p].empty() ? std::nan("") : rss[p].back())
         .Add("rss_slope_mb_per_10min", slope);
@@ -254,7 +238,7 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
     const std::vector<double>& y = size[z.name];
     run.Add("size_warm", At(sample_t, y, warm_min))
         .Add("size_end", y.empty() ? std::nan("") : y.back())
-        .Add("size_slope_per_10min", 10.0 * Slope(sample_t, y, warm_min));
+        .Add("size_slope_per_10min", 10.0 * fl::bench::LeastSquaresSlope(sample_t, y, warm_min));
     report->AddRun(run);
   }
   fl::bench::Run run;
@@ -307,7 +291,8 @@ int main(int argc, char** argv) {
   program.cli().AddFlag("minutes", &s.minutes, "[min] length of the run (simulated = wall time)");
   program.cli().AddFlag("warmup-minutes", &s.warmup_minutes,
                         "[min] samples before this are left out of the slopes (default: "
-                        "min(5, minutes / 3))");
+                        "min(10, minutes / 3): the fusion's 5-minute active window fills, "
+                        "then its first lap retires)");
   program.cli().AddFlag("sample-s", &s.sample_s, "[s] sampling period");
   program.cli().AddFlag("world", &s.world, "simulated world: paper or corridor");
   program.cli().AddFlag("seed", &s.seed, "simulator seed");

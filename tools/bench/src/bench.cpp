@@ -217,6 +217,22 @@ void Report::RecordInMarkdown(const std::string& md_path, const std::string& com
   std::filesystem::rename(tmp, md_path);
 }
 
+double LeastSquaresSlope(const std::vector<double>& t, const std::vector<double>& y,
+                         double t_from) {
+  double n = 0, st = 0, sy = 0, stt = 0, sty = 0;
+  for (size_t i = 0; i < std::min(t.size(), y.size()); ++i) {
+    if (!(t[i] >= t_from) || !std::isfinite(y[i])) continue;
+    n += 1;
+    st += t[i];
+    sy += y[i];
+    stt += t[i] * t[i];
+    sty += t[i] * y[i];
+  }
+  const double d = n * stt - st * st;
+  if (n < 2 || !(d > 0)) return std::nan("");
+  return (n * sty - st * sy) / d;
+}
+
 Stats ComputeStats(std::vector<double> v) {
   Stats s;
   s.count = v.size();

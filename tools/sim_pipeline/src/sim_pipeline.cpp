@@ -54,7 +54,7 @@ void SimPipeline::Poll() {
         c.state != procman::CommandState::kStopping && c.exited) {
       const int st = c.exit_status;
       const bool clean = WIFEXITED(st) && WEXITSTATUS(st) == 0;
-      if (!clean && !(expected_exit_ && expected_exit_(c))) {
+      if (!clean && !stopped_ && !(expected_exit_ && expected_exit_(c))) {
         ++crashes_;
         crash_note_ << c.spec.name << " "
                     << (WIFSIGNALED(st) ? "killed by signal " + std::to_string(WTERMSIG(st))
@@ -75,7 +75,10 @@ bool SimPipeline::SimExited() const {
 
 procman::HostStatus SimPipeline::Measure() { return deputy_->MeasureStatus(WallUs()); }
 
-void SimPipeline::StopAll() { deputy_->StopAll(); }
+void SimPipeline::StopAll() {
+  stopped_ = true;  // the stop signals' exits are not crashes
+  deputy_->StopAll();
+}
 
 std::vector<procman::CommandStatus> SimPipeline::Commands() const { return deputy_->Commands(); }
 

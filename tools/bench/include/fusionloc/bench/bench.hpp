@@ -75,6 +75,11 @@ struct Stats {
 };
 Stats ComputeStats(std::vector<double> values);
 
+// Least-squares slope of y over t using the points with t >= t_from and a finite y (a trend,
+// e.g. memory per minute after a warm-up); NaN with fewer than two such points.
+double LeastSquaresSlope(const std::vector<double>& t, const std::vector<double>& y,
+                         double t_from = -1e300);
+
 // Peak resident memory of this process so far (VmHWM), in MB.
 double PeakRssMb();
 

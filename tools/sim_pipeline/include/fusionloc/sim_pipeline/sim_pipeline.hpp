@@ -45,6 +45,7 @@ class SimPipeline {
   bool SimExited() const;
   // CPU and memory of every command now (procman's /proc figures).
   procman::HostStatus Measure();
+  // Stops every command; exits from then on are not crashes.
   void StopAll();
   std::vector<procman::CommandStatus> Commands() const;
   // An exit for which this returns true is not a crash (default: none).
@@ -60,6 +61,7 @@ class SimPipeline {
   procman::Orders orders_;
   std::map<std::string, procman::CommandState> state_;
   std::function<bool(const procman::CommandStatus&)> expected_exit_;
+  bool stopped_ = false;
   int crashes_ = 0;
   std::ostringstream crash_note_;
 };
