@@ -11,7 +11,9 @@
 // (least squares) per 10 minutes: rss_slope_mb_per_10min per process (flat: |slope| < 1 MB per
 // 10 min) and size_slope_per_10min per size (bounded: the graph stops growing once the route
 // has been mapped). Messages lost: what the simulator's schedule published minus what arrived
-// here. Every sample also goes to OUT/samples.csv.
+// here. The online FUSED_POSE against GROUND_TRUTH: one SE(2) alignment over the run, the RMS
+// error overall and per minute (OUT/fused_ate_per_minute.csv). Every sample also goes to
+// OUT/samples.csv.
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -24,13 +26,16 @@
 #include <sstream>
 
 #include "bot_core/planar_lidar_t.hpp"
+#include "bot_core/pose_t.hpp"
 #include "fusionloc/bench/bench.hpp"
+#include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/number_format.hpp"
 #include "fusionloc/common/program.hpp"
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/common/status_reporter.hpp"
 #include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/sim_pipeline/sim_pipeline.hpp"
 #include "fusionloc/status_t.hpp"
@@ -89,8 +94,17 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
                     [&](const std::string& ch, const void*, int, fl::Utime) { ++received[ch]; });
   lcm->Subscribe<bot_core::planar_lidar_t>(
       "LASER", [&](const auto& m, const std::string&) { laser_at.emplace(m.utime, NowSeconds()); });
+  fl::eval::Trajectory truth, fused;  // GROUND_TRUTH and the online FUSED_POSE
   lcm->Subscribe<fusionloc::fused_pose_t>("FUSED_POSE", [&](const auto& m, const std::string&) {
     fused_at.emplace(m.utime, NowSeconds());
+    if (fused.empty() || m.utime > fused.back().utime) {
+      fused.push_back({m.utime, fl::Pose2(m.x, m.y, m.theta).ToIsometry3()});
+    }
+  });
+  lcm->Subscribe<bot_core::pose_t>("GROUND_TRUTH", [&](const auto& m, const std::string&) {
+    if (truth.empty() || m.utime > truth.back().utime) {
+      truth.push_back({m.utime, fl::IsometryFromArrays(m.pos, m.orientation)});
+    }
   });
   lcm->Subscribe<fusionloc::status_t>("STATUS_.*", [&](const auto& m, const std::string& ch) {
     auto& st = status[ch];
@@ -241,6 +255,29 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
         .Add("size_slope_per_10min", 10.0 * fl::bench::LeastSquaresSlope(sample_t, y, warm_min));
     report->AddRun(run);
   }
+  // Online fused pose against the truth: one SE(2) alignment over the run, then the RMS error
+  // per minute of data time (does the estimate degrade as the graph is bounded?).
+  double ate = std::nan(""), ate_first = std::nan(""), ate_last = std::nan(""), ate_worst = 0;
+  if (fused.size() >= 2 && truth.size() >= 2) {
+    const fl::eval::AteResult a =
+        fl::eval::ComputeAte(fused, truth, fl::eval::Alignment::kSE2, 20000);
+    ate = a.trans_m.rmse;
+    std::map<int64_t, std::pair<double, int>> per_minute;  // minute -> (sum of e^2, count)
+    for (size_t k = 0; k < a.utimes.size(); ++k) {
+      auto& m = per_minute[(a.utimes[k] - a.utimes.front()) / 60000000];
+      m.first += a.trans_errors_m[k] * a.trans_errors_m[k];
+      ++m.second;
+    }
+    std::ofstream ate_csv(dir + "/fused_ate_per_minute.csv");
+    ate_csv << "minute,fused_ate_m\n";
+    for (const auto& [minute, e] : per_minute) {
+      const double rms = std::sqrt(e.first / e.second);
+      ate_csv << minute << "," << fl::FormatDouble(rms) << "\n";
+      if (std::isnan(ate_first)) ate_first = rms;
+      ate_last = rms;
+      ate_worst = std::max(ate_worst, rms);
+    }
+  }
   fl::bench::Run run;
   run.name = "pipeline";
   run.input = "world " + s.world + ", seed " + std::to_string(s.seed) + ", " +
@@ -260,7 +297,11 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
       .Add("messages_lost", static_cast<double>(lost))
       .Add("scans_without_fused_pose",
            static_cast<double>(expected.at("LASER")) - static_cast<double>(all_latency_ms.size()))
-      .Add("crashes", pipeline.crashes());
+      .Add("crashes", pipeline.crashes())
+      .Add("fused_ate_m", ate)
+      .Add("fused_ate_m_first_minute", ate_first)
+      .Add("fused_ate_m_last_minute", ate_last)
+      .Add("fused_ate_m_worst_minute", ate_worst);
   std::ostringstream note;
   note << "warm-up " << fl::FormatDouble(warm_min) << " min; "
        << (pipeline.crashes() == 0 ? "no crash" : "CRASHES: " + pipeline.crash_note());
