@@ -565,6 +565,7 @@ SolveSummary FactorGraphFusion::Update() {
   }
   oldest_touched_node_ = -1;
   summary = SolveWindow(first);
+  optimised_until_ = nodes_.back().utime;
   ++counters_.updates;
   if (summary.ran) last_summary_ = summary;
   return summary;
@@ -706,6 +707,7 @@ void FactorGraphFusion::ApplyFullSolve(const FullSolveJob& job) {
   for (int k = 0; k < solved; ++k) {
     if (!nodes_[k].fixed) nodes_[k].state = job.states_[k];
   }
+  optimised_until_ = std::max(optimised_until_, nodes_[solved - 1].utime);
   FillUnconstrained(0);
   ++counters_.full_solves;
   last_summary_ = job.summary_;
@@ -805,7 +807,8 @@ void FactorGraphFusion::RetireOldNodes() {
   const int limit = std::min({n - options_.max_window_nodes,
                               options_.use_wheel_odometry ? next_odom_pair_ - 1 : n, n - 1});
   int end = first;
-  while (end < limit && nodes_[end].utime < cutoff) ++end;
+  // Only nodes that some solve has placed (a journal restore adds nodes without solving).
+  while (end < limit && nodes_[end].utime < cutoff && nodes_[end].utime <= optimised_until_) ++end;
   if (end == first) return;
 
   // 1. Each retired node: kept as a map node, or merged into the nearest map node near it.

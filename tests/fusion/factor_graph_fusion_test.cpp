@@ -670,6 +670,38 @@ TEST(FusionFactorGraph, BoundedGraphStopsGrowingOnceTheRouteIsMapped) {
   EXPECT_LT(MaxError(fusion.Trajectory(), d.truth), 1e-3);
 }
 
+TEST(FusionFactorGraph, NodesRetireOnlyOnceASolveHasPlacedThem) {
+  // A journal restore adds every node without solving, then runs one full solve: nothing may
+  // be frozen at its unoptimised (drifting RBPF) pose before that.
+  FusionSimOptions so;
+  so.laps = 6;
+  so.loop_closure = false;
+  so.vision_offset_s = 0.0;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FusionOptions o = TestOptions();
+  o.active_window_s = 30.0;
+  o.max_window_nodes = 100;
+  FactorGraphFusion fusion(o);
+  size_t lf = 0;
+  for (size_t k = 0; k + 1 < d.rbpf.size(); ++k) {
+    ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[k].utime, d.rbpf[k].T_map_base).ok());
+    while (lf < d.laser_factors.size() && d.laser_factors[lf].utime_j <= d.rbpf[k].utime) {
+      ASSERT_TRUE(fusion.AddFactor(d.laser_factors[lf++]).ok());
+    }
+  }
+  EXPECT_EQ(fusion.num_retired_nodes(), 0);
+  EXPECT_EQ(fusion.num_nodes(), static_cast<int>(d.rbpf.size()) - 1);
+  EXPECT_GT(MaxError(fusion.Trajectory(), d.truth), 0.5);  // the RBPF's drift
+  fusion.FullSolve();
+  // The next node retires everything older than the window, at its solved pose.
+  ASSERT_TRUE(fusion.AddLaserPose(d.rbpf.back().utime, d.rbpf.back().T_map_base).ok());
+  ASSERT_TRUE(fusion.AddFactor(d.laser_factors.back()).ok());
+  EXPECT_GT(fusion.num_retired_nodes(), static_cast<int64_t>(d.rbpf.size()) / 2);
+  EXPECT_LT(fusion.num_nodes(), 500);
+  fusion.FullSolve();
+  EXPECT_LT(MaxError(fusion.Trajectory(), d.truth), 1e-3);
+}
+
 TEST(FusionFactorGraph, BoundedGraphIsAsAccurateAsTheFullOneOnNoisyData) {
   // Noisy laser and vision factors, 8 laps, several seeds: the bounded graph (30 s window)
   // against keeping every node.

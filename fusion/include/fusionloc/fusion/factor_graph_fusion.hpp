@@ -70,11 +70,12 @@
 // BOUNDED GRAPH (a robot that runs for hours): nodes older than active_window_s behind the
 // newest leave the optimised graph, in batches of 10 s of nodes (never while a full-solve job
 // is out, never the newest max_window_nodes nodes, never a node whose odometry pair is still
-// open). Their fused poses are frozen into the retired trajectory (Trajectory(), PoseAt()
-// still give every node). A retired node is kept as a FIXED MAP NODE unless a map node already
-// lies within map_node_spacing_m and map_node_spacing_rad of it (a region already mapped);
-// then it is merged into the nearest such map node: every factor between it and an active
-// node is re-anchored onto the map node,
+// open, never a node no solve has placed yet: a journal restore adds its nodes without
+// solving, so they retire only after its final full solve). Their fused poses are frozen into the
+// retired trajectory (Trajectory(), PoseAt() still give every node). A retired node is kept as a
+// FIXED MAP NODE unless a map node already lies within map_node_spacing_m and map_node_spacing_rad
+// of it (a region already mapped); then it is merged into the nearest such map node: every factor
+// between it and an active node is re-anchored onto the map node,
 //     T_a_j = T_a_d * T_d_j    (T_a_d = T_map_a^-1 T_map_d, both frozen: exact),
 // and a factor whose ends are all fixed (no longer able to move anything) is dropped. The
 // map nodes are held constant in every solve and give the gauge once the first node has
@@ -390,6 +391,7 @@ class FactorGraphFusion {
   std::deque<RetiredNode> retired_;
   int num_fixed_ = 0;             // nodes_[0, num_fixed_) are the map nodes
   bool job_outstanding_ = false;  // PrepareFullSolve() ... ApplyFullSolve(): indices held
+  Utime optimised_until_ = 0;     // newest node of the last Update() or applied full solve
   Eigen::Matrix3d latest_covariance_ = Eigen::Matrix3d::Zero();
   SolveSummary last_summary_;
   FusionCounters counters_;
