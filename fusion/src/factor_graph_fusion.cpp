@@ -342,10 +342,7 @@ void FactorGraphFusion::TimelineNode(int k, int* node, Pose2* T_node_k) const {
   *T_node_k = ToPose2(it->state).between(d.T_map_base);
 }
 
-bool FactorGraphFusion::Attach(Utime t, int* node, Pose2* T_node_t) const {
-  if (nodes_.empty()) return false;
-  const Utime tol = SecondsToUtime(options_.attach_tolerance_s);
-  // First timeline entry at or after t.
+int FactorGraphFusion::TimelineLowerBound(Utime t) const {
   int lo = 0, hi = TimelineSize();
   while (lo < hi) {
     const int mid = lo + (hi - lo) / 2;
@@ -354,7 +351,13 @@ bool FactorGraphFusion::Attach(Utime t, int* node, Pose2* T_node_t) const {
     else
       hi = mid;
   }
-  const int b = lo;
+  return lo;
+}
+
+bool FactorGraphFusion::Attach(Utime t, int* node, Pose2* T_node_t) const {
+  if (nodes_.empty()) return false;
+  const Utime tol = SecondsToUtime(options_.attach_tolerance_s);
+  const int b = TimelineLowerBound(t);  // first timeline entry at or after t
   if (b == 0) {
     // At or before the first node: no interpolation possible; exact or within tolerance.
     if (TimelineUtime(0) - t > tol) return false;
@@ -761,20 +764,12 @@ bool FactorGraphFusion::PoseAt(Utime t, Pose2* T_map_base) const {
   if (nodes_.empty()) return false;
   // The trajectory: the retired nodes (frozen), then the active nodes.
   const int r = static_cast<int>(retired_.size());
-  const int size = TimelineSize();
   auto utime = [&](int k) { return TimelineUtime(k); };
   auto pose = [&](int k) {
     return k < r ? retired_[k].T_map_base : ToPose2(nodes_[num_fixed_ + k - r].state);
   };
-  if (t < utime(0) || t > utime(size - 1)) return false;
-  int lo = 0, hi = size;
-  while (lo < hi) {
-    const int mid = lo + (hi - lo) / 2;
-    if (utime(mid) < t)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
+  if (t < utime(0) || t > utime(TimelineSize() - 1)) return false;
+  const int lo = TimelineLowerBound(t);
   if (utime(lo) == t) {
     *T_map_base = pose(lo);
     return true;

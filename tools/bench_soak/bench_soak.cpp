@@ -131,13 +131,7 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
         "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${DIR}/sim.yaml "
         "--rate 1",
         false}});
-  auto spin = [&](double seconds) {
-    const double end = NowSeconds() + seconds;
-    while (NowSeconds() < end && !fl::ShutdownRequested()) {
-      lcm->HandleSubscriptions(2);
-      pipeline.Poll();
-    }
-  };
+  auto spin = [&](double seconds) { pipeline.Spin(lcm.get(), seconds); };
   pipeline.Start(spin);
   const double t0 = NowSeconds();
 

@@ -90,13 +90,7 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
        {"sim",
         "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${SIM} "
         "--rate 1"}});
-  auto spin = [&](double seconds) {
-    const double end = NowSeconds() + seconds;
-    while (NowSeconds() < end && !fl::ShutdownRequested()) {
-      lcm->HandleSubscriptions(2);
-      pipeline.Poll();
-    }
-  };
+  auto spin = [&](double seconds) { pipeline.Spin(lcm.get(), seconds); };
   pipeline.Start(spin);
   const double t0 = NowSeconds();
   fl::bench::Progress progress("bench system " + name, static_cast<int64_t>(s.duration_s));

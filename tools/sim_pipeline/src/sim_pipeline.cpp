@@ -5,6 +5,8 @@
 #include <chrono>
 #include <stdexcept>
 
+#include "fusionloc/common/shutdown.hpp"
+
 namespace fl::bench {
 
 double NowSeconds() {
@@ -63,6 +65,14 @@ void SimPipeline::Poll() {
       }
     }
     state_[c.spec.name] = c.state;
+  }
+}
+
+void SimPipeline::Spin(LcmInterface* lcm, double seconds) {
+  const double end = NowSeconds() + seconds;
+  while (NowSeconds() < end && !ShutdownRequested()) {
+    lcm->HandleSubscriptions(2);
+    Poll();
   }
 }
 

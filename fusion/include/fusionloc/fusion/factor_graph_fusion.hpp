@@ -376,6 +376,8 @@ class FactorGraphFusion {
   int TimelineSize() const;
   Utime TimelineUtime(int k) const;
   const Pose2& TimelineRbpf(int k) const;
+  // The first timeline entry at or after t (TimelineSize() if none).
+  int TimelineLowerBound(Utime t) const;
   // The graph node and T_node_k of timeline entry k (a retired one: its map node).
   void TimelineNode(int k, int* node, Pose2* T_node_k) const;
 

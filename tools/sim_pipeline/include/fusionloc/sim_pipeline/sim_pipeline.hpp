@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/procman/deputy.hpp"
 #include "fusionloc/sim/sim_options.hpp"
 
@@ -42,6 +43,9 @@ class SimPipeline {
   void Start(const std::function<void(double)>& spin, double settle_s = 2.5);
   // Deputy poll and crash watch; call every few ms.
   void Poll();
+  // Handles `lcm`'s messages and polls for `seconds` (or until a shutdown is requested): the
+  // loop of a benchmark with one bus.
+  void Spin(LcmInterface* lcm, double seconds);
   bool SimExited() const;
   // CPU and memory of every command now (procman's /proc figures).
   procman::HostStatus Measure();
