@@ -196,6 +196,10 @@ def case_live(args, tmp):
         px, py = driver.execute_script("return flViewer.worldToCanvas(%f, %f)" % (x, y))
         region = driver.execute_script("return flViewer.readRegion(%f, %f, 2)" % (px, py))
         check(not any(near(c, (0x00, 0xff, 0xaa), 40) for c in region), "nothing 2 m off the trajectory")
+        # STATUS comes about once a second: wait for it (on a loaded machine it can come after
+        # the drawing checks above).
+        wait_for(driver, "flViewer.state.processes.some(function (p) "
+                 "{ return p.process === 'fl-fixture'; })", "the fixture's STATUS", timeout=10)
         names = driver.execute_script(
             "return flViewer.state.processes.map(function (p) { return p.process; })")
         check("fl-fixture" in names, "process panel lists the fixture's STATUS: %s" % names)
