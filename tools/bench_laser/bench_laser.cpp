@@ -585,17 +585,17 @@ int main(int argc, char** argv) {
             ++skipped;
             continue;
           }
-          odometry.push_back({data.scans[i].utime, odom.ToIsometry3()});
           fl::rbpf::ScanResult r;
           const auto t0 = std::chrono::steady_clock::now();
           const fl::Status s = slam.AddScan(data.scans[i], odom, &r);
           const double ms =
               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                   .count();
-          if (!s.ok()) {
+          if (!s.ok()) {  // e.g. a stamp that goes back (intel-corrected: 940.54 after 940.654)
             ++skipped;
             continue;
           }
+          odometry.push_back({data.scans[i].utime, odom.ToIsometry3()});
           ms_all.push_back(ms);
           online.push_back({data.scans[i].utime, r.T_world_base.ToIsometry3()});
           for (const fl::rbpf::KeyframeFactor& f : r.factors) {
@@ -653,6 +653,8 @@ int main(int argc, char** argv) {
             .Add("items", static_cast<double>(ms_all.size()))
             .Add("processed", static_cast<double>(st.processed))
             .Add("matched_pairs", static_cast<double>(ate.trans_m.count))
+            .Add("keyframes", static_cast<double>(st.keyframes))
+            .Add("keyframe_reuses", static_cast<double>(st.keyframe_reuses))
             .Add("loop_candidates", static_cast<double>(st.loop_candidates))
             .Add("loop_closures", static_cast<double>(st.loop_closures))
             .Add("loop_searches", static_cast<double>(st.loop_searches))
