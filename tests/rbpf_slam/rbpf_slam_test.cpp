@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 
 #include "fusionloc/common/yaml_options.hpp"
@@ -261,6 +262,7 @@ TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {
   auto closure_keyframes = [&](int spacing, RbpfSlamStats* stats) {
     RbpfSlamOptions o = TestOptions(10);
     o.graph.loop_closure_spacing = spacing;
+    o.graph.reuse_distance = 0.0;  // every keyframe of the second lap is new and may close
     RbpfSlam slam(o);
     std::vector<int> kf;
     for (size_t k = 0; k < run.utimes.size(); ++k) {
@@ -290,6 +292,80 @@ TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {
   EXPECT_LT(min_gap_every, 4);
   EXPECT_GE(min_gap_spaced, 4);
   EXPECT_LT(spaced.loop_candidates, every.loop_candidates);
+}
+
+// Laps of a mapped loop: with keyframe reuse (the default) the keyframes stop growing after
+// the first lap, once the first return has closed the loop (reuse waits for it); without it
+// every lap adds a lap of keyframes. The reuse factors measure
+// the scan against the old keyframe (checked against the truth) and the final trajectory is as
+// good as without reuse.
+TEST(RbpfSlam, RevisitsReuseKeyframesAndTheGraphStopsGrowing) {
+  const int laps = 4;
+  const test::LoopRun run = RoomLoopRun(laps);
+  const size_t per_lap = run.utimes.size() / laps;
+  std::map<fl::Utime, size_t> index;
+  for (size_t k = 0; k < run.utimes.size(); ++k) index[run.utimes[k]] = k;
+  struct Outcome {
+    std::vector<int64_t> keyframes_after_lap;
+    RbpfSlamStats stats;
+    double max_err = 0.0;
+    int reuse_factors = 0;
+    double worst_reuse_factor_err_m = 0.0;
+  };
+  auto drive = [&](double reuse_distance) {
+    RbpfSlamOptions o = TestOptions(10);
+    o.graph.reuse_distance = reuse_distance;
+    RbpfSlam slam(o);
+    Outcome out;
+    for (size_t k = 0; k < run.utimes.size(); ++k) {
+      ScanResult r;
+      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+      for (const KeyframeFactor& f : r.factors) {
+        EXPECT_LT(f.utime_i, f.utime_j);
+        EXPECT_GT(f.information.determinant(), 0.0);
+        if (f.keyframe_j >= 0) continue;
+        ++out.reuse_factors;
+        EXPECT_TRUE(f.is_loop_closure);
+        EXPECT_EQ(f.utime_j, run.utimes[k]) << "a reuse factor ends at its scan";
+        const fl::Pose2 truth =
+            run.truth[index.at(f.utime_i)].between(run.truth[index.at(f.utime_j)]);
+        out.worst_reuse_factor_err_m = std::max(
+            out.worst_reuse_factor_err_m, (truth.translation() - f.T_i_j.translation()).norm());
+      }
+      if ((k + 1) % per_lap == 0) out.keyframes_after_lap.push_back(slam.stats().keyframes);
+    }
+    slam.Finish();
+    out.stats = slam.stats();
+    const auto traj = slam.Trajectory();
+    EXPECT_EQ(traj.size(), run.utimes.size());
+    for (size_t k = 0; k < traj.size(); ++k) {
+      out.max_err = std::max(
+          out.max_err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
+    }
+    return out;
+  };
+  const Outcome reuse = drive(RbpfSlamOptions().graph.reuse_distance);
+  const Outcome all = drive(0.0);
+  ASSERT_EQ(reuse.keyframes_after_lap.size(), static_cast<size_t>(laps));
+  const int64_t first_lap = reuse.keyframes_after_lap[0];
+  // Without reuse each lap adds about a lap of keyframes.
+  EXPECT_GT(all.keyframes_after_lap.back(), 3 * first_lap);
+  EXPECT_EQ(all.stats.keyframe_reuses, 0);
+  EXPECT_EQ(all.reuse_factors, 0);
+  // With it (84, 85, 85, 85 here), laps 2-4 together add under a tenth of the first lap's ...
+  EXPECT_LT(reuse.keyframes_after_lap.back() - first_lap, first_lap / 10)
+      << "keyframes per lap: " << reuse.keyframes_after_lap[0] << " "
+      << reuse.keyframes_after_lap[1] << " " << reuse.keyframes_after_lap[2] << " "
+      << reuse.keyframes_after_lap[3];
+  // ... and the last lap almost none.
+  EXPECT_LE(reuse.keyframes_after_lap[3] - reuse.keyframes_after_lap[2], 2);
+  EXPECT_GT(reuse.stats.keyframe_reuses, 2 * first_lap);
+  EXPECT_EQ(reuse.reuse_factors, reuse.stats.keyframe_reuses);
+  EXPECT_LT(reuse.worst_reuse_factor_err_m, 0.1);
+  // The first return still closed the loop.
+  EXPECT_GE(reuse.stats.loop_closures, 1);
+  EXPECT_LT(reuse.max_err, 0.25);
+  EXPECT_LT(reuse.max_err, all.max_err + 0.05);
 }
 
 TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
@@ -510,6 +586,7 @@ TEST(RbpfSlam, NoLoopSearchWhereIcpFailedOnlyOnOverlap) {
   auto stats = [&](bool search_after_partial_overlap) {
     RbpfSlamOptions o = TestOptions(10);
     o.graph.loop_search_after_partial_overlap = search_after_partial_overlap;
+    o.graph.reuse_distance = 0.0;  // every keyframe of the second lap searches for closures
     RbpfSlam slam(o);
     for (size_t k = 0; k < run.utimes.size(); ++k) {
       ScanResult r;

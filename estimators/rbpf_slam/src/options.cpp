@@ -152,6 +152,10 @@ Status GraphOptions::Validate() const {
   FL_RETURN_IF_ERROR(loop_search.Validate());
   FL_RETURN_IF_ERROR(recovery_search.Validate("graph.recovery_search"));
   FL_RETURN_IF_ERROR(NonNegative("graph.recovery_min_gain", recovery_min_gain));
+  FL_RETURN_IF_ERROR(NonNegative("graph.reuse_distance", reuse_distance));
+  FL_RETURN_IF_ERROR(NonNegative("graph.reuse_angle", reuse_angle));
+  FL_RETURN_IF_ERROR(Positive("graph.reuse_max_correction_m", reuse_max_correction_m));
+  FL_RETURN_IF_ERROR(Positive("graph.reuse_max_correction_rad", reuse_max_correction_rad));
   if (loop_max_candidates < 1) return Status::Error("graph.loop_max_candidates must be >= 1");
   if (loop_closure_spacing < 1) {
     return Status::Error(

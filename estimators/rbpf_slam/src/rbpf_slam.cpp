@@ -233,7 +233,7 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
     return Status::Ok();
   }
   res->T_world_base = CurrentPose();
-  const int kf = static_cast<int>(keyframes_.size()) - 1;
+  const int kf = anchor_.keyframe;
   path_.push_back({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), odom_, false});
   return Status::Ok();
 }
@@ -244,7 +244,7 @@ void RbpfSlam::FinishScan(ScanResult* res) {
   res->keyframe_pending = false;
   MaybeAddKeyframe(pending_utime_, res);
   res->T_world_base = CurrentPose();
-  const int kf = static_cast<int>(keyframes_.size()) - 1;
+  const int kf = anchor_.keyframe;
   path_.push_back({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base), odom_, true});
 }
 
@@ -333,7 +333,7 @@ void RbpfSlam::IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
 
 bool RbpfSlam::KeyframeDue(const fl::Pose2& pose) const {
   if (keyframes_.empty()) return true;
-  const fl::Pose2 d = graph_.pose(static_cast<int>(keyframes_.size()) - 1).between(pose);
+  const fl::Pose2 d = (graph_.pose(anchor_.keyframe) * anchor_.T_kf_anchor).between(pose);
   return std::hypot(d.x, d.y) >= opt_.graph.keyframe_distance ||
          std::abs(d.theta) >= opt_.graph.keyframe_angle;
 }
@@ -344,6 +344,8 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   const std::optional<TiledGrid> pre_scan_map = std::move(pre_scan_map_);
   pre_scan_map_.reset();
   if (!KeyframeDue(pose)) return;
+  const int reuse = ReuseCandidate(pose);
+  if (reuse >= 0 && ReuseKeyframe(reuse, utime, pose, res)) return;
   Keyframe kf;
   kf.utime = utime;
   kf.points_base = hits_base_;
@@ -356,8 +358,10 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   const int j = graph_.AddNode(pose);
   ++stats_.keyframes;
   res->new_keyframe = true;
+  const Anchor from = anchor_;
+  anchor_ = Anchor{j, fl::Pose2(), odom_, stats_.odometry_jumps, false};
   if (j == 0) return;
-  const int i = j - 1;
+  const int i = from.keyframe;
   const fl::Pose2 prior = graph_.pose(i).between(pose);
   PoseGraphEdge edge;
   edge.i = i;
@@ -371,7 +375,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
     bool moved_node = false;  // by the divergence check or the lost-track search
     if (opt_.graph.divergence_check) {
       // Did the filter lock onto a wrong match? ICP from the odometry's relative pose too.
-      const fl::Pose2 odom_rel = keyframes_[i].odom.between(keyframes_[j].odom);
+      const fl::Pose2 odom_rel = OdometryFromAnchor(from, j);
       const fl::Pose2 diff = prior.between(odom_rel);
       if (Beyond(diff, 0.05, 0.03)) {
         const IcpResult alt = AlignPointToLine(keyframes_[i].normals_base,
@@ -400,8 +404,8 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
     if (!moved_node && pre_scan_map && (!icp_ok || Beyond(icp_moved, 0.1, 0.05))) {
       fl::Pose2 corrected;
       IcpResult from_corrected;
-      if (SearchLostTrack(i, j, pose, *pre_scan_map, icp_ok ? &icp : nullptr, &corrected,
-                          &from_corrected)) {
+      if (SearchLostTrack(i, j, pose, OdometryFromAnchor(from, j), *pre_scan_map,
+                          icp_ok ? &icp : nullptr, &corrected, &from_corrected)) {
         ++stats_.recoveries;
         CorrectNewestKeyframe(j, pose, corrected);
         icp = from_corrected;
@@ -423,13 +427,76 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   // Where ICP succeeded, a filter edge also holds j where the filter put it (it knows the
   // corridor's axis from the odometry and the map); not across a flagged odometry jump.
   if (edge_from_icp && opt_.graph.filter_edges &&
-      keyframes_[i].odometry_jumps == keyframes_[j].odometry_jumps) {
-    graph_.AddEdge(FilterEdge(i, j));
+      from.odometry_jumps == keyframes_[j].odometry_jumps) {
+    graph_.AddEdge(FilterEdge(from, j));
   }
   if (opt_.graph.enabled) SearchLoopClosure(j, res);
 }
 
-bool RbpfSlam::SearchLostTrack(int i, int j, const fl::Pose2& pose,
+fl::Pose2 RbpfSlam::OdometryFromAnchor(const Anchor& from, int j) const {
+  return from.T_kf_anchor * from.odom.between(keyframes_[j].odom);
+}
+
+int RbpfSlam::ReuseCandidate(const fl::Pose2& pose) const {
+  const GraphOptions& g = opt_.graph;
+  if (!g.enabled || g.reuse_distance <= 0.0) return -1;
+  // Only once the revisit is in the graph: the anchor closed a loop, or is itself a reuse. The
+  // first keyframes of a return are new and close the loop (the graph corrects the drift).
+  if (!anchor_.reused && anchor_.keyframe != last_closure_keyframe_) return -1;
+  int best = -1;
+  double best_d = g.reuse_distance;
+  for (int c = 0; c < graph_.num_nodes(); ++c) {
+    // A revisit: at least loop_min_travel of path back, as for a loop closure.
+    if (path_length_ - keyframes_[c].path_length < g.loop_min_travel) continue;
+    const fl::Pose2 d = graph_.pose(c).between(pose);
+    const double dist = std::hypot(d.x, d.y);
+    if (dist < best_d && std::abs(d.theta) < g.reuse_angle) {
+      best_d = dist;
+      best = c;
+    }
+  }
+  return best;
+}
+
+bool RbpfSlam::ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, ScanResult* res) {
+  const GraphOptions& g = opt_.graph;
+  // Verified as a loop closure is (ICP against the submap around c, with its thresholds), from
+  // the graph's relative pose; it must stay close to it: a revisit that has drifted further
+  // closes its loop instead. Along a corridor's axis ICP sees no error: there the filter's own
+  // estimate stands.
+  const fl::Pose2 prior = graph_.pose(c).between(pose);
+  IcpOptions io = opt_.icp;
+  io.min_inlier_fraction = g.loop_min_inlier_fraction;
+  io.max_rms = g.loop_max_rms;
+  const IcpResult icp = AlignPointToLine(LoopSubmap(c, path_length_), hits_base_, prior, io);
+  const fl::Pose2 correction = prior.between(icp.T_ref_query);
+  if (!icp.ok ||
+      !Within(correction, g.reuse_max_correction_m, g.reuse_max_correction_rad)) {
+    ++stats_.reuse_rejections;
+    return false;
+  }
+  fl::Pose2 T_c_anchor = prior;
+  if (!Within(correction, g.feedback_min_correction_m, 0.02)) {
+    // The filter has drifted from the map it revisits: localise it there, as a loop closure's
+    // feedback does (the particles moved, their maps those of the keyframes; with the
+    // keyframes bounded, and unchanged since the last rebuild, that is a copy).
+    const fl::Pose2 T_corr = graph_.pose(c) * icp.T_ref_query * pose.inverse();
+    for (Particle& p : particles_) p.pose = T_corr * p.pose;
+    RebuildMaps();
+    ++stats_.map_rebuilds;
+    ++stats_.reuse_corrections;
+    T_c_anchor = icp.T_ref_query;
+  }
+  anchor_ = Anchor{c, T_c_anchor, odom_, stats_.odometry_jumps, true};
+  ++stats_.keyframe_reuses;
+  KeyframeFactor f = Factor(c, c, icp, true);
+  f.keyframe_j = -1;  // the scan, not a keyframe
+  f.utime_j = utime;
+  res->factors.push_back(f);
+  return true;
+}
+
+bool RbpfSlam::SearchLostTrack(int i, int j, const fl::Pose2& pose, const fl::Pose2& odom_rel,
                                const TiledGrid& map_before_scan, const IcpResult* icp_from_filter,
                                fl::Pose2* corrected, IcpResult* icp) const {
   const GraphOptions& g = opt_.graph;
@@ -449,7 +516,6 @@ bool RbpfSlam::SearchLostTrack(int i, int j, const fl::Pose2& pose,
     const fl::Pose2 filter_rel = T_world_i.between(pose);
     CorrelativeResult cr = CorrelativeMatch(keyframes_[i].points_base, keyframes_[j].points_base,
                                             filter_rel, g.recovery_search);
-    const fl::Pose2 odom_rel = keyframes_[i].odom.between(keyframes_[j].odom);
     if (g.recovery_search_from_odometry && Beyond(filter_rel.between(odom_rel), 0.05, 0.03)) {
       const CorrelativeResult from_odom = CorrelativeMatch(
           keyframes_[i].points_base, keyframes_[j].points_base, odom_rel, g.recovery_search);
@@ -495,16 +561,17 @@ KeyframeFactor RbpfSlam::Factor(int i, int j, const IcpResult& icp, bool is_loop
   return f;
 }
 
-PoseGraphEdge RbpfSlam::FilterEdge(int i, int j) const {
+PoseGraphEdge RbpfSlam::FilterEdge(const Anchor& from, int j) const {
   const GraphOptions& g = opt_.graph;
   const MotionOptions& m = opt_.motion;
   PoseGraphEdge e;
-  e.i = i;
+  e.i = from.keyframe;
   e.j = j;
-  e.T_i_j = graph_.pose(i).between(graph_.pose(j));
-  // The std grows with the odometry's motion (the motion model's noise, which the filter's
-  // particles sampled), not with the filter's (which includes any correction).
-  const fl::Pose2 odom = keyframes_[i].odom.between(keyframes_[j].odom);
+  e.T_i_j = graph_.pose(e.i).between(graph_.pose(j));
+  // The std grows with the odometry's motion since the anchoring scan (the motion model's
+  // noise, which the filter's particles sampled), not with the filter's (which includes any
+  // correction).
+  const fl::Pose2 odom = from.odom.between(keyframes_[j].odom);
   const double d = std::hypot(odom.x, odom.y), r = std::abs(odom.theta);
   const double k = g.filter_edge_sigma_scale;
   const double s_xy = std::max(k * (m.srr * d + m.srt * r), g.filter_edge_min_sigma_m);
@@ -587,15 +654,14 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   }
 }
 
-bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) {
+std::vector<PointNormal> RbpfSlam::LoopSubmap(int cand, double path_length) const {
   const GraphOptions& g = opt_.graph;
-  // Reference: the candidate and its neighbours, in the candidate's base frame.
   std::vector<PointNormal> ref;
   const fl::Pose2 pc = graph_.pose(cand);
   const int n = static_cast<int>(keyframes_.size());
   for (int k = std::max(0, cand - g.loop_submap_half_width);
        k <= std::min(n - 1, cand + g.loop_submap_half_width); ++k) {
-    if (keyframes_[j].path_length - keyframes_[k].path_length < g.loop_min_travel) continue;
+    if (path_length - keyframes_[k].path_length < g.loop_min_travel) continue;
     const fl::Pose2 T_c_k = pc.between(graph_.pose(k));
     const Eigen::Matrix2d R = T_c_k.rotation();
     for (const PointNormal& pn : keyframes_[k].normals_base) {
@@ -605,7 +671,14 @@ bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) {
       ref.push_back(q);
     }
   }
+  return ref;
+}
+
+bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) {
+  const GraphOptions& g = opt_.graph;
+  const std::vector<PointNormal> ref = LoopSubmap(cand, keyframes_[j].path_length);
   if (ref.empty()) return false;
+  const fl::Pose2 pc = graph_.pose(cand);
   const fl::Pose2 prior = pc.between(graph_.pose(j));
   IcpOptions io = opt_.icp;
   io.min_inlier_fraction = g.loop_min_inlier_fraction;
@@ -638,7 +711,7 @@ bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) {
 bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   if (graph_loop_edges_ == optimized_loop_edges_) return false;
   const GraphOptions& g = opt_.graph;
-  const int last = graph_.num_nodes() - 1;
+  const int last = anchor_.keyframe;  // where the particles are
   std::vector<fl::Pose2> before(graph_.num_nodes());
   for (int k = 0; k < graph_.num_nodes(); ++k) before[k] = graph_.pose(k);
   // Optimise; a loop edge the solution still disagrees with grossly is wrong: drop the worst
@@ -666,12 +739,12 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   }
   optimized_loop_edges_ = graph_loop_edges_;
   if (res) res->graph_changed = true;
-  // Feed back only when the newest keyframe (where the particles are) was corrected.
+  // Feed back only when the anchor keyframe (where the particles are) was corrected.
   const fl::Pose2 c = before[last].between(graph_.pose(last));
   if (!g.feed_back || Within(c, g.feedback_min_correction_m, 0.02)) {
     return true;
   }
-  // Feed back: shift every particle by the correction of the latest keyframe and give all of
+  // Feed back: shift every particle by the correction of the anchor keyframe and give all of
   // them the map rebuilt from the corrected keyframes.
   const fl::Pose2 T_corr = graph_.pose(last) * before[last].inverse();
   for (Particle& p : particles_) p.pose = T_corr * p.pose;

@@ -8,7 +8,8 @@
 //   3. N_eff = 1 / Σ w̃² ; systematic resampling only when N_eff < N_th (eq. 4);
 //   4. the scan is integrated into each particle's copy-on-write tiled map.
 // Keyframes (every keyframe_distance / keyframe_angle of the best particle) get a point-to-line
-// ICP factor to the previous keyframe (and, in the internal graph, a filter edge holding the
+// ICP factor to the keyframe the filter is anchored to (the previous one, or on a revisit the
+// existing keyframe it reused instead of adding one: graph.reuse_*) (and, in the internal graph, a filter edge holding the
 // keyframe where the filter put it, for what ICP leaves free); loop closures are searched by
 // proximity and verified by ICP against a local submap; the pose graph is optimised with Ceres
 // and the correction is fed back: the particles' maps are rebuilt from the corrected keyframes
@@ -78,6 +79,10 @@ struct RbpfSlamStats {
   int64_t map_rebuilds_continued = 0;   // ... that continued the previous rebuild's map
   int64_t divergences = 0;              // keyframes where ICP from odometry overruled the filter
   int64_t recoveries = 0;               // keyframes where the lost-track search moved the filter
+  int64_t keyframe_reuses = 0;          // keyframes due where an existing one was reused (revisit)
+  int64_t reuse_rejections = 0;         // ... where the nearby one did not verify (a new one came)
+  int64_t reuse_corrections = 0;        // reuses that moved the filter onto the map (> feedback
+                                        //     correction)
 };
 
 class RbpfSlam {
@@ -149,6 +154,16 @@ class RbpfSlam {
     double log_w = 0.0;
     TiledGrid map;
   };
+  // The keyframe the filter is anchored to: the newest one, or on a revisit the existing one it
+  // reused. The next keyframe is due, and its edges and factors start, from the anchoring scan.
+  struct Anchor {
+    int keyframe = -1;
+    fl::Pose2 T_kf_anchor;        // the anchoring scan in the keyframe's frame (identity for a
+                                  //     new keyframe; the filter's pose on a reuse)
+    fl::Pose2 odom;               // odometry pose (flagged jumps removed) at the anchoring scan
+    int64_t odometry_jumps = 0;   // flagged odometry jumps before it
+    bool reused = false;          // an existing keyframe reused on a revisit
+  };
 
   void ConvertScan(const LaserScan& scan, ScanResult* result);
   void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
@@ -156,28 +171,40 @@ class RbpfSlam {
   // Integrates points (base frame) seen from T_world_base into map.
   void IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
                      const std::vector<Eigen::Vector2d>& points_base);
-  // Whether a best-particle pose would become a keyframe (distance or angle from the last).
+  // Whether a best-particle pose would become a keyframe (distance or angle from the anchor).
   bool KeyframeDue(const fl::Pose2& pose) const;
   void MaybeAddKeyframe(fl::Utime utime, ScanResult* result);
+  // Revisit (graph.reuse_*): the existing keyframe nearest to `pose` within reuse_distance and
+  // reuse_angle, other than the anchor; -1 if none.
+  int ReuseCandidate(const fl::Pose2& pose) const;
+  // Anchors the filter to keyframe c for this scan at `pose` if ICP of the scan against c
+  // verifies within the reuse correction; the factor from c to the scan goes in result.
+  bool ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, ScanResult* result);
+  // The odometry's relative pose from anchor `from`'s keyframe to keyframe j.
+  fl::Pose2 OdometryFromAnchor(const Anchor& from, int j) const;
   // Lost-track search for new keyframe j (options.hpp, recovery_*), `map_before_scan` the best
   // particle's map before j's scan entered it, `icp_from_filter` the successful ICP against
   // keyframe i from the filter's pose (nullptr if it failed: then a correlative search
   // proposes the candidate): true if the filter's pose `pose` should move to `*corrected`;
   // `*icp` is then ICP against keyframe i from there (ok false if it failed).
-  bool SearchLostTrack(int i, int j, const fl::Pose2& pose, const TiledGrid& map_before_scan,
-                       const IcpResult* icp_from_filter, fl::Pose2* corrected,
-                       IcpResult* icp) const;
+  // `odom_rel` is the odometry's relative pose from keyframe i to j.
+  bool SearchLostTrack(int i, int j, const fl::Pose2& pose, const fl::Pose2& odom_rel,
+                       const TiledGrid& map_before_scan, const IcpResult* icp_from_filter,
+                       fl::Pose2* corrected, IcpResult* icp) const;
   // Moves the newest keyframe j from `pose` to `corrected`, the particles with it, and
   // rebuilds their maps from the keyframes.
   void CorrectNewestKeyframe(int j, const fl::Pose2& pose, const fl::Pose2& corrected);
   void SearchLoopClosure(int kf, ScanResult* result);
+  // The points of keyframe `cand` and its loop_submap_half_width neighbours on each side, in
+  // cand's base frame; only keyframes at least loop_min_travel of path before `path_length`.
+  std::vector<PointNormal> LoopSubmap(int cand, double path_length) const;
   // Matches keyframe j against the submap around keyframe `cand` (correlative search, then
   // ICP); true and the ICP result if verified.
   bool VerifyLoopClosure(int cand, int j, IcpResult* icp);
   Eigen::Matrix3d GraphEdgeInformation(const IcpResult& icp) const;
-  // The filter edge from keyframe i to the new keyframe j at their current graph poses
-  // (options.hpp, graph.filter_edges).
-  PoseGraphEdge FilterEdge(int i, int j) const;
+  // The filter edge from anchor `from`'s keyframe to the new keyframe j at their current graph
+  // poses (options.hpp, graph.filter_edges).
+  PoseGraphEdge FilterEdge(const Anchor& from, int j) const;
   // The published factor of an ICP result between keyframes i and j (calibrated information).
   KeyframeFactor Factor(int i, int j, const IcpResult& icp, bool is_loop_closure) const;
   bool OptimizeAndFeedBack(ScanResult* result);
@@ -209,6 +236,7 @@ class RbpfSlam {
   std::vector<uint8_t> is_hit_;
 
   std::vector<Keyframe> keyframes_;
+  Anchor anchor_;
   // The best particle's map before the scan of a keyframe-to-be entered it (lost-track search);
   // a copy-on-write copy, held only until the keyframe is added.
   std::optional<TiledGrid> pre_scan_map_;

@@ -25,10 +25,11 @@ struct PointNormal {
 };
 
 // A relative-pose measurement between two keyframes, in the robot BASE frame:
-// T_i_j = T_world_base(i)^-1 * T_world_base(j); information over (x, y, yaw).
+// T_i_j = T_world_base(i)^-1 * T_world_base(j); information over (x, y, yaw). On a revisit
+// that reused keyframe i (graph.reuse_*), j is the scan at utime_j, not a keyframe.
 struct KeyframeFactor {
   int keyframe_i = -1;
-  int keyframe_j = -1;
+  int keyframe_j = -1;            // -1: a scan that reused keyframe i
   fl::Utime utime_i = 0;
   fl::Utime utime_j = 0;
   fl::Pose2 T_i_j;
