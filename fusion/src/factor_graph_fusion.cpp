@@ -780,12 +780,15 @@ bool FactorGraphFusion::PoseAt(Utime t, Pose2* T_map_base) const {
   return true;
 }
 
-std::vector<TrajectoryPoint> FactorGraphFusion::Trajectory() const {
+std::vector<TrajectoryPoint> FactorGraphFusion::Trajectory(Utime from) const {
+  const auto first_retired =
+      std::lower_bound(retired_.begin(), retired_.end(), from,
+                       [](const RetiredNode& d, Utime t) { return d.utime < t; });
   std::vector<TrajectoryPoint> out;
-  out.reserve(retired_.size() + nodes_.size());
-  for (const RetiredNode& d : retired_) out.push_back({d.utime, d.T_map_base});
+  out.reserve(static_cast<size_t>(retired_.end() - first_retired) + nodes_.size());
+  for (auto it = first_retired; it != retired_.end(); ++it) out.push_back({it->utime, it->T_map_base});
   for (int k = num_fixed_; k < num_nodes(); ++k) {
-    out.push_back({nodes_[k].utime, ToPose2(nodes_[k].state)});
+    if (nodes_[k].utime >= from) out.push_back({nodes_[k].utime, ToPose2(nodes_[k].state)});
   }
   return out;
 }

@@ -178,6 +178,21 @@ TEST(EvalReadLcm, PoseFusedAndTrajectoryChannels) {
       }
       w.Write("FUSED_TRAJECTORY", t, t.utime);
     }
+    // The fusion's periodic messages carry the latest part of the trajectory (trajectory_t.lcm):
+    // poses 0-3, then 2-5 re-estimated; merged, 0-1 of the first and 2-5 of the second.
+    for (int k = 0; k < 2; ++k) {
+      fusionloc::trajectory_t t{};
+      t.utime = 3000000 + k;
+      t.num_poses = 4;
+      for (int i = 2 * k; i < 2 * k + 4; ++i) {
+        t.utimes.push_back(1000000 + i * 100000);
+        t.x.push_back(100.0 * (k + 1) + i);
+        t.y.push_back(0.0);
+        t.z.push_back(0.0);
+        t.theta.push_back(0.0);
+      }
+      w.Write("PARTIAL_TRAJECTORY", t, t.utime);
+    }
     w.Close();
   }
   ASSERT_TRUE(IsLcmLog(log));
@@ -200,6 +215,11 @@ TEST(EvalReadLcm, PoseFusedAndTrajectoryChannels) {
   const Trajectory traj = ReadTrajectoryLcm(log, "FUSED_TRAJECTORY");
   ASSERT_EQ(traj.size(), 6u);
   EXPECT_NEAR(traj[0].T_world_base.translation().x(), 20.0, 1e-12);
+  const Trajectory partial = ReadTrajectoryLcm(log, "PARTIAL_TRAJECTORY");
+  ASSERT_EQ(partial.size(), 6u);
+  EXPECT_NEAR(partial[1].T_world_base.translation().x(), 101.0, 1e-12);
+  EXPECT_NEAR(partial[2].T_world_base.translation().x(), 202.0, 1e-12);
+  EXPECT_NEAR(partial[5].T_world_base.translation().x(), 205.0, 1e-12);
 
   std::string msg = ErrorOf([&] { ReadTrajectoryLcm(log, "VO_POSE"); });
   EXPECT_NE(msg.find("channel 'VO_POSE' not found"), std::string::npos) << msg;

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/trajectory_merge.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/relative_pose_factor_t.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
@@ -220,6 +222,75 @@ TEST(FusionNodeInput, TimeStampsOutOfRangeAreDroppedAndCounted) {
   ASSERT_EQ(f.fused.size(), 1u);
   EXPECT_NEAR(f.fused[0].x, 1.0, 1e-9);
   EXPECT_EQ(f.node->status().dropped(), 3);
+}
+
+// With a bounded graph, FUSED_TRAJECTORY carries the active window and trajectory_overlap_s of
+// final poses before it; the last message is the whole trajectory. Merged in order (the
+// consumers' rule, trajectory_merge.hpp), the periodic messages give every scan, and the final
+// poses they carry are those of the whole trajectory at the end.
+TEST(FusionNodeTrajectory, PeriodicMessagesCarryTheLatestPartAndTheLastOneAll) {
+  constexpr int kLongSteps = 900;  // 90 s at 10 Hz
+  FusionProcessConfig config;
+  config.graph.active_window_s = 20.0;
+  config.trajectory_overlap_s = 5.0;
+  auto lcm = MakeLcm("memq://");
+  std::vector<fusionloc::trajectory_t> messages;
+  lcm->Subscribe<fusionloc::trajectory_t>(
+      channels::kFusedTrajectory,
+      [&](const fusionloc::trajectory_t& m, const std::string&) { messages.push_back(m); });
+  FusionNodeOptions options;
+  options.map_out = "";
+  options.sync_full_solve = true;
+  FusionNode node(config, options, lcm.get(), ChannelMap());
+  for (int k = 0; k < kLongSteps; ++k) {
+    fusionloc::wheel_odometry_t odom{};
+    odom.utime = StepTime(k, 0);
+    odom.x = TruePose(k).x;
+    odom.y = TruePose(k).y;
+    odom.theta = TruePose(k).theta;
+    lcm->Publish(channels::kOdometry, odom, odom.utime);
+    lcm->Publish(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)), 0);
+    while (lcm->HandleSubscriptions(0) > 0) {
+    }
+  }
+  const size_t periodic = messages.size();
+  node.Finish();
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  ASSERT_GT(periodic, 50u);
+  ASSERT_EQ(messages.size(), periodic + 1);
+  const fusionloc::trajectory_t& whole = messages.back();
+  ASSERT_EQ(whole.num_poses, kLongSteps);
+  EXPECT_EQ(whole.utimes.front(), StepTime(0, 0));
+
+  struct P {
+    Utime utime;
+    double x, y, theta;
+  };
+  auto poses = [](const fusionloc::trajectory_t& m) {
+    std::vector<P> v;
+    for (int i = 0; i < m.num_poses; ++i) v.push_back({m.utimes[i], m.x[i], m.y[i], m.theta[i]});
+    return v;
+  };
+  std::vector<P> merged;
+  int partial = 0, largest = 0;
+  for (size_t i = 0; i < periodic; ++i) {
+    partial += messages[i].utimes.front() > StepTime(0, 0) ? 1 : 0;
+    largest = std::max(largest, messages[i].num_poses);
+    MergeTrajectoryTail(&merged, poses(messages[i]), [](const P& p) { return p.utime; });
+  }
+  EXPECT_GT(partial, 20) << "once nodes retire, the messages start after the first scan";
+  // Bounded: window (20 s, retired in 10 s batches, at least max_window_nodes) + 5 s overlap.
+  EXPECT_LE(largest, config.graph.max_window_nodes + 160) << "of " << kLongSteps;
+  // Every scan up to the last periodic message, in order, none missing.
+  ASSERT_EQ(merged.size(), static_cast<size_t>(kLongSteps));
+  for (int k = 0; k < kLongSteps; ++k) ASSERT_EQ(merged[k].utime, StepTime(k, 0)) << k;
+  // The first half was final long before the end: the same poses as the whole trajectory.
+  for (int k = 0; k < kLongSteps / 2; ++k) {
+    EXPECT_EQ(merged[k].x, whole.x[k]) << k;
+    EXPECT_EQ(merged[k].y, whole.y[k]) << k;
+    EXPECT_EQ(merged[k].theta, whole.theta[k]) << k;
+  }
 }
 
 }  // namespace

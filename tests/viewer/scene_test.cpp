@@ -213,6 +213,26 @@ TEST(Scene, ResetForgetsEverything) {
   EXPECT_EQ(CountType(s.Snapshot(), "grid"), 0);
 }
 
+TEST(Scene, ATrajectoryMessageReplacesThePosesFromItsFirstTimeOn) {
+  // FUSED_TRAJECTORY sends its latest part (trajectory_t.lcm): poses 0-9, then 5-14 re-estimated.
+  Scene s{SceneOptions()};
+  std::vector<ViewPose> whole, latest;
+  for (int k = 0; k < 10; ++k) whole.push_back({1000 + k, 1.0 * k, 0.0, 0.0, 0.0});
+  for (int k = 5; k < 15; ++k) latest.push_back({1000 + k, 1.0 * k, 0.5, 0.0, 0.0});
+  s.SetTrajectory("FUSED_TRAJECTORY", 1009, whole);
+  s.SetTrajectory("FUSED_TRAJECTORY", 1014, latest);
+  const std::vector<Frame> f = s.TakeChanges(10.0);
+  const Frame* t = FindType(f, "trajectory");
+  ASSERT_NE(t, nullptr);
+  EXPECT_NE(Header(*t).find("\"count\":15"), std::string::npos) << Header(*t);
+  const std::string payload = Payload(*t);
+  ASSERT_EQ(payload.size(), 15u * 4u * sizeof(float));
+  std::vector<float> v(15 * 4);
+  std::memcpy(v.data(), payload.data(), payload.size());
+  EXPECT_FLOAT_EQ(v[4 * 4 + 1], 0.0f);  // pose 4 kept: y 0
+  EXPECT_FLOAT_EQ(v[5 * 4 + 1], 0.5f);  // pose 5 replaced: y 0.5
+}
+
 TEST(SceneOptions, ValidateNamesTheBadField) {
   SceneOptions o;
   EXPECT_TRUE(o.Validate().ok());

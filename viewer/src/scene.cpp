@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "fusionloc/common/json.hpp"
+#include "fusionloc/common/trajectory_merge.hpp"
 
 namespace fl::viewer {
 namespace {
@@ -125,8 +126,11 @@ void Scene::AddPose(const std::string& source, const ViewPose& pose) {
 void Scene::SetTrajectory(const std::string& source, Utime utime,
                           const std::vector<ViewPose>& poses) {
   clock_ = std::max(clock_, utime);
-  trajectories_[source] =
-      DecimateTrajectory(poses, options_.trajectory_min_distance_m, options_.trail_min_turn_rad);
+  // A message may carry only the trajectory's latest part (trajectory_t.lcm).
+  MergeTrajectoryTail(
+      &trajectories_[source],
+      DecimateTrajectory(poses, options_.trajectory_min_distance_m, options_.trail_min_turn_rad),
+      [](const ViewPose& p) { return p.utime; });
   trajectory_changed_[source] = true;
 }
 

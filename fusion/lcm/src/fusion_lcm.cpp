@@ -280,7 +280,7 @@ void FusionNode::Finish() {
   if (fusion_.num_nodes() > 0) {
     const SolveSummary s = fusion_.FullSolve();
     FL_LOG(INFO) << "final " << s.ToString();
-    PublishTrajectory(last_utime_);
+    PublishTrajectory(last_utime_, /*whole=*/true);
   }
   SaveMap();
   status_.SetState(fusionloc::status_t::LEVEL_OK,
@@ -437,8 +437,14 @@ void FusionNode::PublishPose() {
   status_.CountOut();
 }
 
-void FusionNode::PublishTrajectory(Utime utime) {
-  lcm_->Publish(ch_trajectory_, TrajectoryToLcm(fusion_.Trajectory(), utime), utime);
+void FusionNode::PublishTrajectory(Utime utime, bool whole) {
+  Utime from = 0;
+  const Utime final_until = fusion_.final_until();
+  const Utime overlap = SecondsToUtime(config_.trajectory_overlap_s);
+  if (!whole && config_.trajectory_overlap_s > 0.0 && final_until > overlap) {
+    from = final_until - overlap;
+  }
+  lcm_->Publish(ch_trajectory_, TrajectoryToLcm(fusion_.Trajectory(from), utime), utime);
   status_.CountOut();
   last_trajectory_utime_ = utime;
 }

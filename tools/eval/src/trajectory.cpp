@@ -22,6 +22,7 @@
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/trajectory_merge.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/occupancy_grid_t.hpp"
 #include "fusionloc/point_cloud_t.hpp"
@@ -283,7 +284,7 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
 
   std::map<std::string, int64_t> channel_counts;
   std::vector<StampedPose> poses;
-  fusionloc::trajectory_t last_traj;
+  Trajectory traj_merged;  // trajectory_t messages, merged (MergeTrajectoryTail)
   bool have_traj = false;
   int64_t kind = 0;  // hash of the channel's type once known
   int64_t decode_failures = 0;
@@ -351,7 +352,25 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
         ++decode_failures;
         continue;
       }
-      last_traj = msg;
+      const size_t n = static_cast<size_t>(std::max(0, msg.num_poses));
+      if (msg.utimes.size() != n || msg.x.size() != n || msg.y.size() != n ||
+          msg.z.size() != n || msg.theta.size() != n) {
+        throw EvalError("channel '" + channel + "' of '" + log_path +
+                        "': trajectory_t arrays do not match num_poses");
+      }
+      Trajectory latest;
+      latest.reserve(n);
+      for (size_t i = 0; i < n; ++i) {
+        StampedPose p;
+        p.utime = msg.utimes[i];
+        p.T_world_base = Pose2(msg.x[i], msg.y[i], msg.theta[i]).ToIsometry3();
+        p.T_world_base.translation().z() = msg.z[i];
+        if (!std::isfinite(msg.theta[i])) p.T_world_base.translation().setConstant(std::nan(""));
+        latest.push_back(p);
+      }
+      // A message may carry only the trajectory's latest part (trajectory_t.lcm).
+      MergeTrajectoryTail(&traj_merged, std::move(latest),
+                          [](const StampedPose& p) { return p.utime; });
       have_traj = true;
     }
   }
@@ -380,22 +399,8 @@ Trajectory ReadTrajectoryLcm(const std::string& log_path, const std::string& cha
   const std::string what = "channel '" + channel + "' of '" + log_path + "'";
   Trajectory traj;
   if (have_traj) {
-    const auto& m = last_traj;
-    const size_t n = static_cast<size_t>(std::max(0, m.num_poses));
-    if (m.utimes.size() != n || m.x.size() != n || m.y.size() != n || m.z.size() != n ||
-        m.theta.size() != n) {
-      throw EvalError(what + ": trajectory_t arrays do not match num_poses");
-    }
-    for (size_t i = 0; i < n; ++i) {
-      StampedPose p;
-      p.utime = m.utimes[i];
-      p.T_world_base = Pose2(m.x[i], m.y[i], m.theta[i]).ToIsometry3();
-      p.T_world_base.translation().z() = m.z[i];
-      if (!std::isfinite(m.theta[i])) p.T_world_base.translation().setConstant(std::nan(""));
-      traj.push_back(p);
-    }
-    CheckTrajectory(traj, what + " (last trajectory_t message)");
-    return traj;
+    CheckTrajectory(traj_merged, what + " (its trajectory_t messages, merged)");
+    return traj_merged;
   }
 
   std::stable_sort(poses.begin(), poses.end(),

@@ -303,7 +303,8 @@ class FactorGraphFusion {
   const Eigen::Matrix3d& latest_covariance() const { return latest_covariance_; }
   // Fused pose at any time inside the trajectory, interpolated between nodes.
   bool PoseAt(Utime utime, Pose2* T_map_base) const;
-  std::vector<TrajectoryPoint> Trajectory() const;
+  // Fused pose of every laser scan at or after `from` (0: the whole trajectory), in time order.
+  std::vector<TrajectoryPoint> Trajectory(Utime from = 0) const;
 
   // Nodes in the graph: the fixed map nodes and the active window.
   int num_nodes() const { return static_cast<int>(nodes_.size()); }

@@ -117,7 +117,8 @@ class Scene {
   void SetCameraToBase(const Eigen::Isometry3d& T_base_camera);
   // A pose of `source` (one of PoseSources()).
   void AddPose(const std::string& source, const ViewPose& pose);
-  // A whole trajectory (RBPF_TRAJECTORY, FUSED_TRAJECTORY), replacing the previous one.
+  // A trajectory message (RBPF_TRAJECTORY, FUSED_TRAJECTORY): its poses replace those from
+  // its first time on (a message may carry only the latest part, trajectory_t.lcm).
   void SetTrajectory(const std::string& source, Utime utime, const std::vector<ViewPose>& poses);
   // A whole cloud in the map frame (FUSED_MAP), replacing the previous one.
   void SetCloud(const std::string& source, Utime utime, const float* xyz, size_t n);

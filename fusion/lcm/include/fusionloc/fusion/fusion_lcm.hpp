@@ -81,7 +81,8 @@ class FusionNode : public LcmNode {
   void OnOdometry(const fusionloc::wheel_odometry_t& m);
   void OnPoints(const fusionloc::point_cloud_t& m);
   void PublishPose();
-  void PublishTrajectory(Utime utime);
+  // The latest part of the trajectory (FusionConfig::trajectory_overlap_s), or all of it.
+  void PublishTrajectory(Utime utime, bool whole = false);
   void StartFullSolve();
   void FinishFullSolve();
   void SaveMap();
