@@ -73,7 +73,6 @@ class ScanOdometrySync {
   int laser_stream_ = -1, odom_stream_ = -1;
   OdometryBuffer odom_buffer_;
   std::deque<LaserScan> pending_;
-  bool flushed_ = false;
 };
 
 // ---- the node ----
