@@ -114,5 +114,22 @@ TEST(StreamMerger, ClockCheckNeedsAStreamStillArriving) {
   EXPECT_TRUE(n.Push(d, 5100000, 2, 5100000).ok());
 }
 
+// Found by fuzzing (tests/fuzz/regressions/rbpf_node/stream-merger-overflow): a stamp near
+// INT64_MIN on one stream, a sane one on the other; the lead check subtracted them (signed
+// overflow, undefined behaviour). The differences saturate: the sane stamp is far ahead of
+// the corrupt one and is dropped as a clock jump, the corrupt one never runs ahead.
+TEST(StreamMerger, StampsAtTheEndsOfInt64DoNotOverflow) {
+  StreamMerger<int> m(300000);
+  const int a = m.AddStream("A"), b = m.AddStream("B");
+  ASSERT_TRUE(m.Push(b, INT64_MIN + 1000, 0, 0).ok());
+  EXPECT_FALSE(m.Push(a, 1000000, 1, 100).ok());
+  EXPECT_TRUE(m.Push(b, INT64_MIN + 2000, 2, INT64_MAX).ok());
+  StreamMerger<int>::Item item;
+  while (m.Pop(&item)) {
+  }
+  m.Flush();
+  EXPECT_TRUE(m.Pop(&item));
+}
+
 }  // namespace
 }  // namespace fl

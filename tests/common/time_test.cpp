@@ -31,4 +31,11 @@ TEST(TimeTest, SecondsBetweenFarApartTimes) {
 }
 
 }  // namespace
+TEST(TimeTest, UtimeDifferenceSaturates) {
+  EXPECT_EQ(UtimeDifference(1000, 3000), 2000);
+  EXPECT_EQ(UtimeDifference(INT64_MIN + 10, 1000000), INT64_MAX);
+  EXPECT_EQ(UtimeDifference(1000000, INT64_MIN + 10), INT64_MIN);
+  EXPECT_EQ(UtimeDifference(INT64_MAX, INT64_MIN), INT64_MIN);
+}
+
 }  // namespace fl

@@ -66,13 +66,13 @@ class StreamMerger {
     if (arrival != kNoArrival) {
       for (const Stream& other : streams_) {
         if (&other == &s || other.last_arrival == kNoArrival ||
-            arrival - other.last_arrival > max_lead_us_) {
+            UtimeDifference(other.last_arrival, arrival) > max_lead_us_) {
           continue;  // silent or never heard: nothing to compare with
         }
-        if (utime - other.last_utime > max_lead_us_) {
+        if (UtimeDifference(other.last_utime, utime) > max_lead_us_) {
           return Status::Error(
               "stream '" + s.name + "': time stamp " + FormatUtime(utime) + " is " +
-              FormatDouble(1e-6 * static_cast<double>(utime - other.last_utime)) +
+              FormatDouble(SecondsBetween(other.last_utime, utime)) +
               " s ahead of stream '" + other.name + "' (" + FormatUtime(other.last_utime) +
               "): its clock jumped forward; message dropped until the stamps "
               "agree again");
@@ -114,7 +114,7 @@ class StreamMerger {
     for (const auto& s : streams_) {
       if (s.last_utime < t) safe = false;  // this stream may still send something earlier
     }
-    if (!safe && newest_utime_ - t < max_latency_us_ && !flushing_) return false;
+    if (!safe && UtimeDifference(t, newest_utime_) < max_latency_us_ && !flushing_) return false;
     *out = std::move(streams_[best].queue.front());
     streams_[best].queue.pop_front();
     released_utime_ = t;

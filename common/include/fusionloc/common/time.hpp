@@ -28,6 +28,14 @@ inline double SecondsBetween(Utime a, Utime b) {
   return (static_cast<double>(b) - static_cast<double>(a)) * 1e-6;
 }
 
+// b - a in microseconds, saturated at the int64 range instead of overflowing (a corrupt stamp
+// near INT64_MIN minus a sane one is undefined behaviour otherwise).
+inline Utime UtimeDifference(Utime a, Utime b) {
+  Utime d = 0;
+  if (__builtin_sub_overflow(b, a, &d)) return b > a ? INT64_MAX : INT64_MIN;
+  return d;
+}
+
 // Wall-clock time now.
 inline Utime NowUtime() {
   return std::chrono::duration_cast<std::chrono::microseconds>(
