@@ -483,7 +483,6 @@ bool RbpfSlam::ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, Scan
     const fl::Pose2 T_corr = graph_.pose(c) * icp.T_ref_query * pose.inverse();
     for (Particle& p : particles_) p.pose = T_corr * p.pose;
     RebuildMaps();
-    ++stats_.map_rebuilds;
     ++stats_.reuse_corrections;
     T_c_anchor = icp.T_ref_query;
   }
@@ -544,7 +543,6 @@ void RbpfSlam::CorrectNewestKeyframe(int j, const fl::Pose2& pose, const fl::Pos
   graph_.set_pose(j, corrected);
   for (Particle& p : particles_) p.pose = T_corr * p.pose;
   RebuildMaps();
-  ++stats_.map_rebuilds;
 }
 
 KeyframeFactor RbpfSlam::Factor(int i, int j, const IcpResult& icp, bool is_loop_closure) const {
@@ -749,7 +747,6 @@ bool RbpfSlam::OptimizeAndFeedBack(ScanResult* res) {
   const fl::Pose2 T_corr = graph_.pose(last) * before[last].inverse();
   for (Particle& p : particles_) p.pose = T_corr * p.pose;
   RebuildMaps();
-  ++stats_.map_rebuilds;
   return true;
 }
 
@@ -771,6 +768,7 @@ void RbpfSlam::RebuildMaps() {
     IntegrateInto(&map, graph_.pose(k), keyframes_[k].points_base);
   }
   map.EndBatch();
+  ++stats_.map_rebuilds;
   if (reuse) ++stats_.map_rebuilds_continued;
   rebuild_poses_.resize(n);
   for (int k = 0; k < n; ++k) rebuild_poses_[k] = graph_.pose(k);
