@@ -368,6 +368,73 @@ TEST(RbpfSlam, RevisitsReuseKeyframesAndTheGraphStopsGrowing) {
   EXPECT_LT(reuse.max_err, all.max_err + 0.05);
 }
 
+// Laps of a mapped loop where no reuse verifies (here forced: a reuse may correct the filter by
+// 0.1 mm at most; in the simulator, 10 cm range noise puts the ICP RMS over the loop limit):
+// without the density bound every lap adds a lap of keyframes; with it
+// (graph.max_keyframes_per_place) a place holds at most about that many keyframes of earlier
+// passes, so the keyframes stop growing once every place of the loop is full, and the filter
+// anchored to the existing keyframes stays as accurate.
+TEST(RbpfSlam, FullPlacesGetNoMoreKeyframesWhenReuseFails) {
+  const int laps = 6;
+  const test::LoopRun run = RoomLoopRun(laps);
+  const size_t per_lap = run.utimes.size() / laps;
+  struct Outcome {
+    std::vector<int64_t> keyframes_after_lap;
+    RbpfSlamStats stats;
+    double max_err = 0.0;
+    int factors_to_scans = 0;  // factors whose end is a scan, not a keyframe (reuses)
+  };
+  auto drive = [&](int max_per_place) {
+    RbpfSlamOptions o = TestOptions(10);
+    o.graph.reuse_max_correction_m = 1e-4;
+    o.graph.reuse_max_correction_rad = 1e-4;
+    o.graph.max_keyframes_per_place = max_per_place;
+    RbpfSlam slam(o);
+    Outcome out;
+    for (size_t k = 0; k < run.utimes.size(); ++k) {
+      ScanResult r;
+      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+      for (const KeyframeFactor& f : r.factors) {
+        EXPECT_LT(f.utime_i, f.utime_j);
+        if (f.keyframe_j < 0) ++out.factors_to_scans;
+      }
+      if ((k + 1) % per_lap == 0) out.keyframes_after_lap.push_back(slam.stats().keyframes);
+    }
+    slam.Finish();
+    out.stats = slam.stats();
+    const auto traj = slam.Trajectory();
+    EXPECT_EQ(traj.size(), run.utimes.size()) << "every scan keeps a final pose";
+    for (size_t k = 0; k < traj.size(); ++k) {
+      out.max_err = std::max(
+          out.max_err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
+    }
+    return out;
+  };
+  const Outcome unbounded = drive(0);
+  const Outcome bounded = drive(4);
+  ASSERT_EQ(bounded.keyframes_after_lap.size(), static_cast<size_t>(laps));
+  const int64_t first_lap = unbounded.keyframes_after_lap[0];
+  // Nothing verifies: without the bound every lap adds about a lap of keyframes.
+  EXPECT_EQ(unbounded.stats.keyframe_reuses, 0);
+  EXPECT_EQ(unbounded.stats.keyframes_bounded, 0);
+  EXPECT_GT(unbounded.keyframes_after_lap.back(), (laps - 1) * first_lap);
+  // With it, the places fill in the first passes (84, 174, 228, 250, 256, 258 here: each lap
+  // adds fewer, as fewer places have room) and the last lap adds almost nothing.
+  const auto& b = bounded.keyframes_after_lap;
+  const std::string per_lap_text = std::to_string(b[0]) + " " + std::to_string(b[1]) + " " +
+                                   std::to_string(b[2]) + " " + std::to_string(b[3]) + " " +
+                                   std::to_string(b[4]) + " " + std::to_string(b[5]);
+  EXPECT_LE(b[laps - 1] - b[laps - 2], first_lap / 20) << "keyframes after each lap: " << per_lap_text;
+  EXPECT_LT(b.back(), 3.5 * first_lap) << per_lap_text;
+  EXPECT_GT(bounded.stats.keyframes_bounded, 2 * first_lap);
+  EXPECT_EQ(bounded.stats.keyframe_reuses, 0);
+  EXPECT_EQ(bounded.factors_to_scans, 0) << "an unverified anchor publishes no factor";
+  // Anchoring to the existing keyframes keeps the trajectory as good.
+  EXPECT_LT(bounded.max_err, 0.25);
+  EXPECT_LT(bounded.max_err, unbounded.max_err + 0.05)
+      << "bounded " << bounded.max_err << " m, unbounded " << unbounded.max_err << " m";
+}
+
 TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {
   // The first 10 m of the loop (no loop closure yet, so no optimisation moves a keyframe): next
   // to each successful sequential ICP edge there is a filter edge with the filter's relative

@@ -655,6 +655,7 @@ int main(int argc, char** argv) {
             .Add("matched_pairs", static_cast<double>(ate.trans_m.count))
             .Add("keyframes", static_cast<double>(st.keyframes))
             .Add("keyframe_reuses", static_cast<double>(st.keyframe_reuses))
+            .Add("keyframes_bounded", static_cast<double>(st.keyframes_bounded))
             .Add("loop_candidates", static_cast<double>(st.loop_candidates))
             .Add("loop_closures", static_cast<double>(st.loop_closures))
             .Add("loop_searches", static_cast<double>(st.loop_searches))

@@ -156,6 +156,7 @@ Status GraphOptions::Validate() const {
   FL_RETURN_IF_ERROR(NonNegative("graph.reuse_angle", reuse_angle));
   FL_RETURN_IF_ERROR(Positive("graph.reuse_max_correction_m", reuse_max_correction_m));
   FL_RETURN_IF_ERROR(Positive("graph.reuse_max_correction_rad", reuse_max_correction_rad));
+  FL_RETURN_IF_ERROR(NonNegative("graph.max_keyframes_per_place", max_keyframes_per_place));
   if (loop_max_candidates < 1) return Status::Error("graph.loop_max_candidates must be >= 1");
   if (loop_closure_spacing < 1) {
     return Status::Error(

@@ -344,8 +344,25 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   const std::optional<TiledGrid> pre_scan_map = std::move(pre_scan_map_);
   pre_scan_map_.reset();
   if (!KeyframeDue(pose)) return;
-  const int reuse = ReuseCandidate(pose);
-  if (reuse >= 0 && ReuseKeyframe(reuse, utime, pose, res)) return;
+  const GraphOptions& g = opt_.graph;
+  const Revisit revisit = EarlierKeyframesNear(pose);
+  // Reuse once the revisit is in the graph (the anchor closed a loop, or is itself a reuse): the
+  // first keyframes of a return are new and close the loop (the graph corrects the drift). In
+  // a place already full of keyframes, whatever the loop.
+  const bool place_full =
+      g.max_keyframes_per_place > 0 && revisit.count >= g.max_keyframes_per_place;
+  const bool loop_in_graph = anchor_.reused || anchor_.keyframe == last_closure_keyframe_;
+  if (revisit.nearest >= 0 && (loop_in_graph || place_full) &&
+      ReuseKeyframe(revisit.nearest, utime, pose, res)) {
+    return;
+  }
+  if (place_full) {
+    // Anchored to the nearest keyframe as the filter has it: no node, no factor, no correction.
+    anchor_ = Anchor{revisit.nearest, graph_.pose(revisit.nearest).between(pose), odom_,
+                     stats_.odometry_jumps, true};
+    ++stats_.keyframes_bounded;
+    return;
+  }
   Keyframe kf;
   kf.utime = utime;
   kf.points_base = hits_base_;
@@ -437,25 +454,24 @@ fl::Pose2 RbpfSlam::OdometryFromAnchor(const Anchor& from, int j) const {
   return from.T_kf_anchor * from.odom.between(keyframes_[j].odom);
 }
 
-int RbpfSlam::ReuseCandidate(const fl::Pose2& pose) const {
+RbpfSlam::Revisit RbpfSlam::EarlierKeyframesNear(const fl::Pose2& pose) const {
   const GraphOptions& g = opt_.graph;
-  if (!g.enabled || g.reuse_distance <= 0.0) return -1;
-  // Only once the revisit is in the graph: the anchor closed a loop, or is itself a reuse. The
-  // first keyframes of a return are new and close the loop (the graph corrects the drift).
-  if (!anchor_.reused && anchor_.keyframe != last_closure_keyframe_) return -1;
-  int best = -1;
+  Revisit r;
+  if (!g.enabled || g.reuse_distance <= 0.0) return r;
   double best_d = g.reuse_distance;
   for (int c = 0; c < graph_.num_nodes(); ++c) {
     // A revisit: at least loop_min_travel of path back, as for a loop closure.
     if (path_length_ - keyframes_[c].path_length < g.loop_min_travel) continue;
     const fl::Pose2 d = graph_.pose(c).between(pose);
     const double dist = std::hypot(d.x, d.y);
-    if (dist < best_d && std::abs(d.theta) < g.reuse_angle) {
+    if (dist >= g.reuse_distance || std::abs(d.theta) >= g.reuse_angle) continue;
+    ++r.count;
+    if (dist < best_d) {
       best_d = dist;
-      best = c;
+      r.nearest = c;
     }
   }
-  return best;
+  return r;
 }
 
 bool RbpfSlam::ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, ScanResult* res) {

@@ -367,6 +367,7 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   status_.Set("keyframes", static_cast<double>(s.keyframes));
   status_.Set("loop_closures", static_cast<double>(s.loop_closures));
   status_.Set("keyframe_reuses", static_cast<double>(s.keyframe_reuses));
+  status_.Set("keyframes_bounded", static_cast<double>(s.keyframes_bounded));
   status_.Set("map_rebuilds", static_cast<double>(s.map_rebuilds));
   status_.Set("divergences", static_cast<double>(s.divergences));
   status_.Set("recoveries", static_cast<double>(s.recoveries));
@@ -393,7 +394,8 @@ std::string RbpfSlamNode::Summary() const {
   const auto& s = slam_.stats();
   return "scans " + std::to_string(s.scans) + ", processed " + std::to_string(s.processed) +
          ", keyframes " + std::to_string(s.keyframes) + " (reused on revisits " +
-         std::to_string(s.keyframe_reuses) + ")" + ", loop closures " +
+         std::to_string(s.keyframe_reuses) + ", in full places unverified " +
+         std::to_string(s.keyframes_bounded) + ")" + ", loop closures " +
          std::to_string(s.loop_closures) + " (of " + std::to_string(s.loop_candidates) +
          " candidates), divergences caught " + std::to_string(s.divergences) +
          ", lost-track recoveries " + std::to_string(s.recoveries) +

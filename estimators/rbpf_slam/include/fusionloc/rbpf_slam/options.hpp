@@ -311,6 +311,17 @@ struct GraphOptions {
   double reuse_angle = 0.35;               // [rad]
   double reuse_max_correction_m = 0.15;    // [m]
   double reuse_max_correction_rad = 0.05;  // [rad]
+  // Keyframe density bound: a keyframe due where this many keyframes at least loop_min_travel
+  // back already lie within reuse_distance and reuse_angle of the filter's pose is not added,
+  // whatever the state of the loop: the scan is first verified against the nearest of them as
+  // a reuse (even before the return closed its loop) and, if that fails (an ICP fit above
+  // loop_max_rms in noisy data, a drift beyond reuse_max_correction), the filter is anchored to
+  // it unverified: its pose relative to the keyframe as the filter has it, no factor, no
+  // correction. The next keyframe due outside the mapped region starts its edges there. With
+  // keyframes 0.5 m apart a pass puts about two within reuse_distance of a pose: 4 = about two
+  // passes per place. Bounds the graph by the mapped area, not by the time driven (the 30-minute
+  // soak, RELIABILITY.md). 0 = no bound.
+  int max_keyframes_per_place = 4;
 
   template <class A>
   void Serialize(A* a) {
@@ -348,6 +359,7 @@ struct GraphOptions {
     a->Visit("reuse_angle", &reuse_angle);
     a->Visit("reuse_max_correction_m", &reuse_max_correction_m);
     a->Visit("reuse_max_correction_rad", &reuse_max_correction_rad);
+    a->Visit("max_keyframes_per_place", &max_keyframes_per_place);
   }
   Status Validate() const;
 };

@@ -83,6 +83,9 @@ struct RbpfSlamStats {
   int64_t reuse_rejections = 0;         // ... where the nearby one did not verify (a new one came)
   int64_t reuse_corrections = 0;        // reuses that moved the filter onto the map (> feedback
                                         //     correction)
+  int64_t keyframes_bounded = 0;        // keyframes due where the place was full
+                                        //     (graph.max_keyframes_per_place) and the reuse did
+                                        //     not verify: anchored to the nearest unverified
 };
 
 class RbpfSlam {
@@ -174,9 +177,13 @@ class RbpfSlam {
   // Whether a best-particle pose would become a keyframe (distance or angle from the anchor).
   bool KeyframeDue(const fl::Pose2& pose) const;
   void MaybeAddKeyframe(fl::Utime utime, ScanResult* result);
-  // Revisit (graph.reuse_*): the existing keyframe nearest to `pose` within reuse_distance and
-  // reuse_angle, other than the anchor; -1 if none.
-  int ReuseCandidate(const fl::Pose2& pose) const;
+  // Revisit (graph.reuse_*): the keyframes at least loop_min_travel back along the path within
+  // reuse_distance and reuse_angle of `pose`: the nearest (-1 if none) and how many.
+  struct Revisit {
+    int nearest = -1;
+    int count = 0;
+  };
+  Revisit EarlierKeyframesNear(const fl::Pose2& pose) const;
   // Anchors the filter to keyframe c for this scan at `pose` if ICP of the scan against c
   // verifies within the reuse correction; the factor from c to the scan goes in result.
   bool ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, ScanResult* result);
