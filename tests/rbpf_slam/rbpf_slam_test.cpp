@@ -52,6 +52,9 @@ RbpfSlamOptions TestOptions(int particles) {
   RbpfSlamOptions o;
   o.particles = particles;
   o.grid.max_range = 25.0;
+  // The test laser's range noise is 1 cm (LoopRunOptions): a free-space margin of one cell is
+  // 2 sigma (the default, 4 cells, is for the simulator's 10 cm).
+  o.grid.free_space_margin = 1;
   return o;
 }
 
