@@ -1,0 +1,458 @@
+// Monte Carlo localization on a saved map (localizer.hpp): a simulated world is mapped by the
+// SLAM, the map goes through the files fl-map-export writes and --localize reads, and another
+// run of the same world (another noise seed) is localized on it.
+#include "fusionloc/rbpf_slam/localizer.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+
+#include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/eval/metrics.hpp"
+#include "fusionloc/maps/map_export.hpp"
+#include "fusionloc/maps/map_load.hpp"
+#include "fusionloc/rbpf_slam/localizer_lcm.hpp"
+#include "fusionloc/rbpf_slam/rbpf_slam.hpp"
+#include "fusionloc/rbpf_slam/rbpf_slam_lcm.hpp"
+#include "fusionloc/rbpf_slam/scan_matcher.hpp"
+#include "laser_fixtures.hpp"
+#include "test_paths.hpp"
+
+namespace fl::rbpf {
+namespace {
+
+LaserScan MakeScan(fl::Utime t, const std::vector<float>& ranges, const test::LoopRunOptions& o) {
+  LaserScan s;
+  s.utime = t;
+  s.ranges = ranges;
+  s.rad0 = o.rad0;
+  s.radstep = o.radstep;
+  return s;
+}
+
+// The room (RoomWithBoxes) mapped by the SLAM on one lap (noise seed 7, 10 scans per second at
+// 1 m/s), exported to PGM + YAML with SaveOccupancyGrid and loaded back with LoadOccupancyGrid:
+// the map a user gets from `fl-map-export` and gives to `fl-rbpf-slam --localize`. The SLAM's
+// own error on that run (ATE of its trajectory) is 0.039 m: the map is that far off the truth
+// here and there.
+OccupancyMap MappedRoom() {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 7;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  RbpfSlamOptions so;
+  so.grid.max_range = 25.0;
+  RbpfSlam slam(so);
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k], lo), run.odom[k], &r).ok());
+  }
+  slam.Finish();
+  test::TempDir dir;
+  maps::SaveOccupancyGrid(GridToLcm(0, slam.BestMap()), dir.file("room"));
+  return OccupancyMapFromLcm(maps::LoadOccupancyGrid(dir.file("room.yaml")));
+}
+
+// The room drawn exactly (every wall segment's cells occupied, the inside free): no map error,
+// so what is left is the localizer's own.
+OccupancyMap ExactRoom() {
+  OccupancyMap m;
+  m.resolution = 0.05;
+  m.origin_x = -11.0;
+  m.origin_y = -7.0;
+  m.width = 440;
+  m.height = 280;
+  m.cells.assign(static_cast<size_t>(m.width) * m.height, -1);
+  for (int j = 0; j < m.height; ++j) {
+    for (int i = 0; i < m.width; ++i) {
+      const double x = m.origin_x + (i + 0.5) * m.resolution;
+      const double y = m.origin_y + (j + 0.5) * m.resolution;
+      if (std::abs(x) < 10.0 && std::abs(y) < 6.0) m.cells[j * m.width + i] = 0;
+    }
+  }
+  const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
+  for (const test::Segment& s : world.segments()) {
+    const double len = (s.b - s.a).norm();
+    for (double t = 0.0; t <= len; t += 0.01) {
+      const Eigen::Vector2d p = s.a + (s.b - s.a) * (t / len);
+      const int i = static_cast<int>(std::floor((p.x() - m.origin_x) / m.resolution));
+      const int j = static_cast<int>(std::floor((p.y() - m.origin_y) / m.resolution));
+      if (i >= 0 && j >= 0 && i < m.width && j < m.height) m.cells[j * m.width + i] = 100;
+    }
+  }
+  return m;
+}
+
+// The fixture's laser has 1 cm of range noise: on the right pose a scan fits at -0.01 .. -0.09
+// per beam (exact map and SLAM map alike), while the pose 3 m ahead in the same corridor
+// (AWrongInitialPoseIsRejectedNotFollowed) still fits at -0.44 .. -0.92, its walls lining up
+// with the corridor's. The default lost_log_likelihood (-0.5) is for lasers of a few cm.
+LocalizerOptions TestOptions() {
+  LocalizerOptions o;
+  o.max_range = 25.0;
+  o.lost_log_likelihood = -0.3;
+  return o;
+}
+
+// A localization run: the scans of `run` from index `from` on, with the odometry of `odom`.
+struct Output {
+  std::vector<fl::Utime> utimes;
+  std::vector<fl::Pose2> poses;   // T_map_base at every scan
+  std::vector<fl::Pose2> truth;
+  std::vector<LocalizationResult> results;
+};
+
+Output Localize(MonteCarloLocalizer* loc, const test::LoopRun& run, const test::LoopRunOptions& lo,
+                const std::vector<fl::Pose2>& odom,
+                const std::function<void(size_t)>& before_scan = {}) {
+  Output out;
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    if (before_scan) before_scan(k);
+    LocalizationResult r;
+    EXPECT_TRUE(loc->AddScan(MakeScan(run.utimes[k], run.ranges[k], lo), odom[k], &r).ok());
+    out.utimes.push_back(run.utimes[k]);
+    out.poses.push_back(r.T_map_base);
+    out.truth.push_back(run.truth[k]);
+    out.results.push_back(std::move(r));
+  }
+  return out;
+}
+
+double Ate(const std::vector<fl::Utime>& t, const std::vector<fl::Pose2>& est,
+           const std::vector<fl::Pose2>& ref) {
+  eval::Trajectory e, r;
+  for (size_t k = 0; k < t.size(); ++k) {
+    e.push_back({t[k], est[k].ToIsometry3()});
+    r.push_back({t[k], ref[k].ToIsometry3()});
+  }
+  return eval::ComputeAte(e, r, eval::Alignment::kSE2, 1000).trans_m.rmse;
+}
+
+double Distance(const fl::Pose2& a, const fl::Pose2& b) { return std::hypot(a.x - b.x, a.y - b.y); }
+
+TEST(Localizer, KldBoundGrowsWithTheOccupiedBins) {
+  EXPECT_EQ(MonteCarloLocalizer::KldParticleCount(1, 0.05, 2.33), 1);
+  // Fox 2003, eq. 13 with k - 1 = 1: 1 / 0.1 * (1 - 2/9 + sqrt(2/9) * 2.33)^3 = 66.03.
+  EXPECT_EQ(MonteCarloLocalizer::KldParticleCount(2, 0.05, 2.33), 67);
+  int previous = 1;
+  for (int bins : {3, 10, 100, 1000}) {
+    const int n = MonteCarloLocalizer::KldParticleCount(bins, 0.05, 2.33);
+    EXPECT_GT(n, previous);
+    previous = n;
+  }
+  // k - 1 = 999: 9990 * (1 - 2/8991 + sqrt(2/8991) * 2.33)^3 = 11060.9, close to linear in k.
+  EXPECT_EQ(MonteCarloLocalizer::KldParticleCount(1000, 0.05, 2.33), 11061);
+}
+
+TEST(Localizer, OptionsValidateAndTheConfigFileLoads) {
+  EXPECT_TRUE(LocalizerOptions().Validate().ok());
+  LocalizerOptions o;
+  o.max_particles = 10;
+  o.min_particles = 20;
+  EXPECT_NE(o.Validate().message().find("max_particles"), std::string::npos);
+  o = LocalizerOptions();
+  o.lost_log_likelihood = 0.5;
+  EXPECT_NE(o.Validate().message().find("lost_log_likelihood"), std::string::npos);
+  o = LocalizerOptions();
+  o.global_hypotheses = 5000;
+  EXPECT_NE(o.Validate().message().find("global_hypotheses"), std::string::npos);
+  // The shipped file holds the defaults, and every key is known.
+  const auto file =
+      LoadYamlFile<LocalizerOptions>(test::SourceDir() + "/config/localizer.yaml");
+  EXPECT_EQ(SaveYamlString(file), SaveYamlString(LocalizerOptions()));
+  EXPECT_THROW(LoadYamlString<LocalizerOptions>("min_particle: 3\n"), ConfigError);
+}
+
+TEST(Localizer, AMapWithoutObstaclesOrMalformedIsRefused) {
+  OccupancyMap m;
+  m.width = 10;
+  m.height = 10;
+  m.cells.assign(100, 0);
+  EXPECT_THROW(MonteCarloLocalizer(LocalizerOptions(), m), std::invalid_argument);
+  m.cells.resize(99);
+  EXPECT_THROW(MonteCarloLocalizer(LocalizerOptions(), m), std::invalid_argument);
+}
+
+// The first case: map a simulated world, then localize in another run of it (another
+// noise seed), from an initial pose: ATE <= 0.05 m.
+TEST(Localizer, LocalizesAnotherRunOfAMappedWorldWithin5cm) {
+  const OccupancyMap map = MappedRoom();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;  // 1 m/s at 10 scans per second
+  lo.seed = 11;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  MonteCarloLocalizer loc(TestOptions(), map);
+  // The operator's initial pose: 0.2 m and 0.1 rad off.
+  const fl::Pose2 start = run.truth[0];
+  ASSERT_TRUE(loc.SetInitialPose(fl::Pose2(start.x + 0.2, start.y - 0.1, start.theta + 0.1)).ok());
+  const Output out = Localize(&loc, run, lo, run.odom);
+  const double ate = Ate(out.utimes, out.poses, out.truth);
+  double worst = 0.0;
+  for (size_t k = 10; k < out.poses.size(); ++k) {
+    worst = std::max(worst, Distance(out.poses[k], out.truth[k]));
+  }
+  const auto& s = loc.stats();
+  std::printf("localization: %zu scans, %lld updates, ATE %.4f m (SE(2)-aligned), worst %.3f m "
+              "(unaligned, after the first second), particles at the end %d (max %d), factors "
+              "%lld, odometry ATE %.3f m\n",
+              out.poses.size(), static_cast<long long>(s.processed), ate, worst,
+              loc.num_particles(), s.max_particles_used, static_cast<long long>(s.factors),
+              Ate(out.utimes, run.odom, out.truth));
+  EXPECT_LE(ate, 0.05);
+  EXPECT_LT(worst, 0.25);
+  EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
+  EXPECT_EQ(s.initial_pose_rejections, 0);
+  EXPECT_EQ(s.lost_detections, 0);
+  EXPECT_EQ(s.global_initializations, 0);
+  // Tracking needs few particles (KLD): the minimum most of the time.
+  EXPECT_LT(s.max_particles_used, 200);
+  // Factors: one per keyframe (0.5 m / 0.35 rad), consecutive, their relative poses close to
+  // the truth's, their information positive definite.
+  EXPECT_GT(s.factors, 60);
+  int checked = 0;
+  for (size_t k = 0; k < out.results.size(); ++k) {
+    for (const KeyframeFactor& f : out.results[k].factors) {
+      EXPECT_EQ(f.keyframe_j, f.keyframe_i + 1);
+      EXPECT_EQ(f.utime_j, out.utimes[k]);
+      const size_t i = static_cast<size_t>(std::find(out.utimes.begin(), out.utimes.end(),
+                                                     f.utime_i) - out.utimes.begin());
+      ASSERT_LT(i, k);
+      const fl::Pose2 truth = out.truth[i].between(out.truth[k]);
+      EXPECT_LT(Distance(truth, f.T_i_j), 0.1);
+      EXPECT_GT(f.information.determinant(), 0.0);
+      EXPECT_GT(f.information(0, 0), 0.0);
+      EXPECT_GT(f.information(2, 2), 0.0);
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, s.factors);
+}
+
+// The localizer's own error: the same run on an exact map of the world.
+TEST(Localizer, OnAnExactMapTheErrorIsTheLocalizersOwn) {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 11;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  MonteCarloLocalizer loc(TestOptions(), ExactRoom());
+  ASSERT_TRUE(loc.SetInitialPose(run.truth[0]).ok());
+  const Output out = Localize(&loc, run, lo, run.odom);
+  std::vector<fl::Utime> t;
+  std::vector<fl::Pose2> updated, truth;
+  for (size_t k = 0; k < out.poses.size(); ++k) {
+    if (!out.results[k].processed) continue;
+    t.push_back(out.utimes[k]);
+    updated.push_back(out.poses[k]);
+    truth.push_back(out.truth[k]);
+  }
+  const double ate = Ate(out.utimes, out.poses, out.truth);
+  const double ate_updates = Ate(t, updated, truth);
+  std::printf("exact map: ATE %.4f m over every scan, %.4f m at the filter updates\n", ate,
+              ate_updates);
+  EXPECT_LE(ate, 0.02);
+  EXPECT_LE(ate_updates, 0.01);
+}
+
+// A map whose origin is not a multiple of its resolution (maps saved by ROS often are not):
+// the poses come out in the map's frame all the same.
+TEST(Localizer, AMapOriginOffTheCellLatticeKeepsTheMapFrame) {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 11;
+  test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  run.utimes.resize(150);
+  OccupancyMap shifted = ExactRoom();
+  const Eigen::Vector2d shift(0.013, -0.021);  // under half a 5 cm cell
+  shifted.origin_x += shift.x();
+  shifted.origin_y += shift.y();
+  MonteCarloLocalizer a(TestOptions(), ExactRoom()), b(TestOptions(), shifted);
+  EXPECT_NEAR((b.map_offset() - a.map_offset() - shift).norm(), 0.0, 1e-12);
+  ASSERT_TRUE(a.SetInitialPose(run.truth[0]).ok());
+  const fl::Pose2 s0(run.truth[0].x + shift.x(), run.truth[0].y + shift.y(), run.truth[0].theta);
+  ASSERT_TRUE(b.SetInitialPose(s0).ok());
+  const Output oa = Localize(&a, run, lo, run.odom), ob = Localize(&b, run, lo, run.odom);
+  for (size_t k = 0; k < oa.poses.size(); ++k) {
+    ASSERT_NEAR(ob.poses[k].x - oa.poses[k].x, shift.x(), 1e-9) << k;
+    ASSERT_NEAR(ob.poses[k].y - oa.poses[k].y, shift.y(), 1e-9) << k;
+  }
+}
+
+// Without an initial pose the filter initialises over the free space and finds the robot.
+// (This and the next two tests run on the exact map, so that the truth is the map's frame.)
+TEST(Localizer, GlobalInitialisationFindsTheRobotWithoutAnInitialPose) {
+  const OccupancyMap map = ExactRoom();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 12;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  MonteCarloLocalizer loc(TestOptions(), map);
+  EXPECT_GT(loc.GlobalCandidates().size(), 1000u);
+  const Output out = Localize(&loc, run, lo, run.odom);
+  ASSERT_TRUE(out.results[0].global_initialization);
+  EXPECT_EQ(out.results[0].particles, TestOptions().global_hypotheses);
+  // The first time after which every pose is within 0.1 m of the truth (between filter updates
+  // the fixture's odometry, 3 cm/m and biased, moves the pose up to 5 cm off).
+  size_t settled = out.poses.size();
+  for (size_t k = out.poses.size(); k-- > 0;) {
+    if (Distance(out.poses[k], out.truth[k]) > 0.1) break;
+    settled = k;
+  }
+  ASSERT_LT(settled, out.poses.size());
+  const double seconds = 1e-6 * static_cast<double>(out.utimes[settled] - out.utimes[0]);
+  std::printf("global initialisation: %d hypotheses -> within 0.1 m for good after %.1f s of "
+              "data; particles at the end %d\n",
+              out.results[0].particles, seconds, loc.num_particles());
+  EXPECT_LE(seconds, 2.0);
+  EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
+  EXPECT_EQ(loc.stats().global_initializations, 1);
+  EXPECT_EQ(loc.num_particles(), TestOptions().min_particles);
+}
+
+// A run whose robot is carried 5 m away (and turned) at `kidnap_index` while its odometry goes
+// on smoothly: the scans from there on are those of the drive from `resume_index`.
+struct KidnapRun {
+  test::LoopRun run;       // utimes, ranges and truth as seen by the robot
+  size_t first_after = 0;  // index of the first scan after the kidnapping
+  double jump_m = 0.0;
+};
+
+KidnapRun MakeKidnapRun(unsigned seed) {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = seed;
+  const test::LoopRun full = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  // Kidnapped on the first straight at x = 3.5 (after 12 s); put down where the route is 5 m
+  // away, on the next straight (heading +y).
+  size_t k0 = 0;
+  while (full.truth[k0].x < 3.5) ++k0;
+  size_t k1 = k0 + 30;
+  while (k1 < full.truth.size() && Distance(full.truth[k1], full.truth[k0]) < 5.0) ++k1;
+  KidnapRun out;
+  out.first_after = k0 + 1;
+  out.jump_m = Distance(full.truth[k1], full.truth[k0]);
+  test::LoopRun& r = out.run;
+  for (size_t k = 0; k <= k0; ++k) {
+    r.utimes.push_back(full.utimes[k]);
+    r.ranges.push_back(full.ranges[k]);
+    r.truth.push_back(full.truth[k]);
+    r.odom.push_back(full.odom[k]);
+  }
+  for (size_t k = k1; k < full.truth.size(); ++k) {
+    r.utimes.push_back(r.utimes.back() + 100000);
+    r.ranges.push_back(full.ranges[k]);
+    r.truth.push_back(full.truth[k]);
+    // The odometry does not see the kidnapping: it goes on with the motion from k1 on.
+    r.odom.push_back(full.odom[k0] * full.odom[k1 - 1].between(full.odom[k]));
+  }
+  return out;
+}
+
+// The second case: a kidnapped robot (a pose jump of 5 m) is recovered within 10 s of
+// data.
+TEST(Localizer, AKidnappedRobotIsFoundAgainWithin10SecondsOfData) {
+  const OccupancyMap map = ExactRoom();
+  const KidnapRun kr = MakeKidnapRun(13);
+  test::LoopRunOptions lo;
+  MonteCarloLocalizer loc(TestOptions(), map);
+  ASSERT_TRUE(loc.SetInitialPose(kr.run.truth[0]).ok());
+  const Output out = Localize(&loc, kr.run, lo, kr.run.odom);
+  const size_t j = kr.first_after;
+  // Tracked before, within 0.1 m of the truth.
+  for (size_t k = 0; k < j; ++k) ASSERT_LT(Distance(out.poses[k], out.truth[k]), 0.1) << k;
+  size_t lost_at = out.poses.size(), settled = out.poses.size();
+  for (size_t k = j; k < out.poses.size(); ++k) {
+    if (out.results[k].lost && lost_at == out.poses.size()) lost_at = k;
+  }
+  for (size_t k = out.poses.size(); k-- > j;) {
+    if (Distance(out.poses[k], out.truth[k]) > 0.1) break;
+    settled = k;
+  }
+  ASSERT_LT(lost_at, out.poses.size()) << "the kidnapping was not detected";
+  ASSERT_LT(settled, out.poses.size()) << "not recovered";
+  const double detect_s = 1e-6 * static_cast<double>(out.utimes[lost_at] - out.utimes[j]);
+  const double recover_s = 1e-6 * static_cast<double>(out.utimes[settled] - out.utimes[j]);
+  std::printf("kidnapped %.2f m: detected after %.1f s, within 0.1 m for good after %.1f s of "
+              "data (%zu s of data after it); lost %lld, global initialisations %lld, particles "
+              "at most %d\n",
+              kr.jump_m, detect_s, recover_s,
+              static_cast<size_t>(1e-6 * static_cast<double>(out.utimes.back() - out.utimes[j])),
+              static_cast<long long>(loc.stats().lost_detections),
+              static_cast<long long>(loc.stats().global_initializations),
+              loc.stats().max_particles_used);
+  EXPECT_GE(kr.jump_m, 5.0);
+  EXPECT_LT(kr.jump_m, 5.2);
+  EXPECT_LE(recover_s, 10.0);
+  EXPECT_EQ(loc.stats().lost_detections, 1);
+  EXPECT_EQ(loc.stats().initial_pose_rejections, 0);
+  EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
+  // No factor spans the kidnapping: the chain restarts after the relocalization.
+  for (size_t k = j; k < out.poses.size(); ++k) {
+    for (const KeyframeFactor& f : out.results[k].factors) EXPECT_GE(f.utime_i, out.utimes[lost_at]);
+  }
+}
+
+// The third case: a wrong initial pose is rejected with a status, not followed.
+TEST(Localizer, AWrongInitialPoseIsRejectedNotFollowed) {
+  const OccupancyMap map = ExactRoom();
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 14;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  for (const bool relocalize : {true, false}) {
+    SCOPED_TRACE(relocalize ? "relocalize" : "report only");
+    LocalizerOptions o = TestOptions();
+    o.relocalize = relocalize;
+    MonteCarloLocalizer loc(o, map);
+    // 3 m ahead of the robot, in the same corridor, same heading.
+    const fl::Pose2 wrong(run.truth[0].x + 3.0, run.truth[0].y, run.truth[0].theta);
+    ASSERT_TRUE(loc.SetInitialPose(wrong).ok());
+    const Output out = Localize(&loc, run, lo, run.odom);
+    size_t rejected = out.poses.size();
+    for (size_t k = 0; k < out.poses.size(); ++k) {
+      if (out.results[k].initial_pose_rejected) {
+        rejected = k;
+        break;
+      }
+      // Until then: never reported as localized, no factor published.
+      EXPECT_NE(out.results[k].state, LocalizerState::kLocalized) << k;
+      EXPECT_TRUE(out.results[k].factors.empty()) << k;
+    }
+    ASSERT_LT(rejected, out.poses.size()) << "the wrong initial pose was never rejected";
+    const double seconds = 1e-6 * static_cast<double>(out.utimes[rejected] - out.utimes[0]);
+    EXPECT_EQ(loc.stats().initial_pose_rejections, 1);
+    EXPECT_LE(seconds, 3.0);
+    if (relocalize) {
+      // Then found globally: localized at the end, within 0.1 m of the truth for the last
+      // half of the run.
+      for (size_t k = out.poses.size() / 2; k < out.poses.size(); ++k) {
+        ASSERT_LT(Distance(out.poses[k], out.truth[k]), 0.1) << k;
+      }
+      EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
+      std::printf("wrong initial pose (3 m off): rejected after %.1f s of data, then found "
+                  "globally\n",
+                  seconds);
+    } else {
+      EXPECT_EQ(out.results[rejected].state, LocalizerState::kLost);
+      // Reported as localized again only where the scans fit the map.
+      size_t last_wrong = 0, localized_wrong = 0;
+      for (size_t k = rejected; k < out.poses.size(); ++k) {
+        const bool wrong = Distance(out.poses[k], out.truth[k]) > 0.1;
+        if (wrong) last_wrong = k;
+        if (wrong && out.results[k].state == LocalizerState::kLocalized) ++localized_wrong;
+      }
+      std::printf("wrong initial pose (3 m off), relocalize off: rejected after %.1f s, state "
+                  "%s at the end, %.3f m off; last scan more than 0.1 m off: %zu of %zu; "
+                  "scans more than 0.1 m off reported as localized: %zu\n",
+                  seconds, LocalizerStateName(loc.state()),
+                  Distance(out.poses.back(), out.truth.back()), last_wrong, out.poses.size(),
+                  localized_wrong);
+      EXPECT_EQ(localized_wrong, 0u);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace fl::rbpf
