@@ -8,9 +8,17 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 
+#include "bot_core/planar_lidar_t.hpp"
+#include "bot_core/pose_t.hpp"
+#include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/yaml_options.hpp"
+#include "fusionloc/relative_pose_factor_t.hpp"
+#include "fusionloc/status_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/maps/map_export.hpp"
 #include "fusionloc/maps/map_load.hpp"
@@ -452,6 +460,176 @@ TEST(Localizer, AWrongInitialPoseIsRejectedNotFollowed) {
       EXPECT_EQ(localized_wrong, 0u);
     }
   }
+}
+
+// ---- the process: fl-rbpf-slam --localize MAP.yaml over a log ----
+
+struct ProcessRun {
+  test::CommandResult result;
+  std::vector<bot_core::pose_t> poses;
+  int factors = 0, maps = 0;
+  std::vector<fusionloc::status_t> statuses;
+};
+
+// Writes the exact room as map files and a log of 25 s of the drive (LASER, ODOMETRY and, before
+// the first scan, INITIAL_POSE `initial`), and runs fl-rbpf-slam --localize on it.
+ProcessRun RunLocalizeProcess(const test::TempDir& dir, const fl::Pose2& initial,
+                              test::LoopRun* run_out) {
+  ProcessRun out;
+  maps::SaveOccupancyGrid(OccupancyMapToLcm(0, ExactRoom()), dir.file("room"));
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 15;
+  test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  run.utimes.resize(250);
+  {
+    LcmLogWriter w(dir.file("in.lcmlog"));
+    bot_core::pose_t p = PoseToLcm(run.utimes[0] - 1000, initial);
+    w.Write("INITIAL_POSE", p, p.utime);
+    for (size_t k = 0; k < run.utimes.size(); ++k) {
+      fusionloc::wheel_odometry_t o{};
+      o.utime = run.utimes[k];
+      o.x = run.odom[k].x;
+      o.y = run.odom[k].y;
+      o.theta = run.odom[k].theta;
+      w.Write("ODOMETRY", o, o.utime);
+      bot_core::planar_lidar_t s{};
+      s.utime = run.utimes[k];
+      s.ranges = run.ranges[k];
+      s.nranges = static_cast<int32_t>(s.ranges.size());
+      s.rad0 = static_cast<float>(lo.rad0);
+      s.radstep = static_cast<float>(lo.radstep);
+      w.Write("LASER", s, s.utime);
+    }
+    w.Close();
+  }
+  out.result = test::RunCommand(test::BinDir() + "/fl-rbpf-slam --localize room.yaml "
+                                "--mounting-wait-s 0 --lcm-url log:in.lcmlog,out.lcmlog",
+                                dir);
+  if (out.result.status != 0) return out;
+  LcmLogReader r(dir.file("out.lcmlog"));
+  LcmLogEvent ev;
+  while (r.Next(&ev)) {
+    const int n = static_cast<int>(ev.data.size());
+    if (ev.channel == "RBPF_POSE") {
+      bot_core::pose_t m{};
+      EXPECT_EQ(m.decode(ev.data.data(), 0, n), n);
+      out.poses.push_back(m);
+    } else if (ev.channel == "RBPF_FACTORS") {
+      fusionloc::relative_pose_factor_t f{};
+      EXPECT_EQ(f.decode(ev.data.data(), 0, n), n);
+      const int8_t laser = fusionloc::relative_pose_factor_t::SOURCE_LASER;
+      EXPECT_EQ(f.source, laser);
+      EXPECT_LT(f.utime_i, f.utime_j);
+      EXPECT_GT(f.information[0], 0.0);   // x
+      EXPECT_GT(f.information[35], 0.0);  // yaw
+      ++out.factors;
+    } else if (ev.channel == "RBPF_MAP") {
+      ++out.maps;
+    } else if (ev.channel == "STATUS_FL_RBPF_SLAM") {
+      fusionloc::status_t m{};
+      EXPECT_EQ(m.decode(ev.data.data(), 0, n), n);
+      out.statuses.push_back(m);
+    }
+  }
+  *run_out = run;
+  return out;
+}
+
+double StatusValue(const fusionloc::status_t& m, const std::string& key) {
+  for (int i = 0; i < m.num_keys; ++i) {
+    if (m.keys[i] == key) return m.values[i];
+  }
+  return std::nan("");
+}
+
+TEST(LocalizerProcess, LocalizesFromInitialPoseAndPublishesWhatTheSlamPublishes) {
+  const std::string bin = test::BinDir() + "/fl-rbpf-slam";
+  if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-rbpf-slam first: " << bin;
+  test::TempDir dir;
+  test::LoopRunOptions lo;
+  lo.seed = 15;
+  const fl::Pose2 start = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo).truth[0];
+  test::LoopRun run;
+  const ProcessRun out = RunLocalizeProcess(dir, start, &run);
+  ASSERT_EQ(out.result.status, 0) << out.result.err;
+  ASSERT_EQ(out.poses.size(), run.utimes.size());
+  double worst = 0.0;
+  for (size_t k = 0; k < out.poses.size(); ++k) {
+    EXPECT_EQ(out.poses[k].utime, run.utimes[k]);
+    worst = std::max(worst, std::hypot(out.poses[k].pos[0] - run.truth[k].x,
+                                       out.poses[k].pos[1] - run.truth[k].y));
+  }
+  EXPECT_LT(worst, 0.1);
+  EXPECT_GT(out.factors, 20);
+  EXPECT_GE(out.maps, 2);  // at the first scan and at the end
+  ASSERT_FALSE(out.statuses.empty());
+  const fusionloc::status_t& last = out.statuses.back();
+  const int8_t ok = fusionloc::status_t::LEVEL_OK;
+  EXPECT_EQ(last.level, ok) << last.message;
+  EXPECT_NE(last.message.find("localized on room.yaml"), std::string::npos) << last.message;
+  EXPECT_EQ(StatusValue(last, "state"), static_cast<double>(LocalizerState::kLocalized));
+  EXPECT_EQ(StatusValue(last, "initial_poses"), 1.0);
+  EXPECT_EQ(StatusValue(last, "initial_pose_rejections"), 0.0);
+  EXPECT_NE(out.result.err.find("INITIAL_POSE"), std::string::npos) << out.result.err;
+}
+
+// The STATUS says that the initial pose was rejected and why (not a silent divergence).
+TEST(LocalizerProcess, AWrongInitialPoseIsReportedInTheStatus) {
+  const std::string bin = test::BinDir() + "/fl-rbpf-slam";
+  if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-rbpf-slam first: " << bin;
+  test::TempDir dir;
+  test::LoopRunOptions lo;
+  lo.seed = 15;
+  const fl::Pose2 start = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo).truth[0];
+  test::LoopRun run;
+  const ProcessRun out =
+      RunLocalizeProcess(dir, fl::Pose2(start.x + 3.0, start.y, start.theta), &run);
+  ASSERT_EQ(out.result.status, 0) << out.result.err;
+  bool reported = false;
+  for (const fusionloc::status_t& m : out.statuses) {
+    if (m.message.find("initial pose (-5.5, -4.5, 0.0 rad) rejected") == std::string::npos) {
+      continue;
+    }
+    reported = true;
+    EXPECT_NE(m.message.find("did not fit the map"), std::string::npos) << m.message;
+    EXPECT_EQ(StatusValue(m, "initial_pose_rejections"), 1.0);
+    const int8_t ok = fusionloc::status_t::LEVEL_OK, warn = fusionloc::status_t::LEVEL_WARN;
+    if (m.level != ok) {
+      EXPECT_EQ(m.level, warn) << m.message;
+    }
+  }
+  EXPECT_TRUE(reported) << out.result.err;
+  EXPECT_NE(out.result.err.find("rejected"), std::string::npos) << out.result.err;
+}
+
+TEST(LocalizerProcess, BadMapFilesAndFlagsExitWithTheReason) {
+  const std::string bin = test::BinDir() + "/fl-rbpf-slam";
+  if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-rbpf-slam first: " << bin;
+  test::TempDir dir;
+  test::CommandResult r = test::RunCommand(bin + " --help", dir);
+  EXPECT_EQ(r.status, 0);
+  EXPECT_NE(r.out.find("--localize"), std::string::npos) << r.out;
+  r = test::RunCommand(bin + " --localize missing.yaml --lcm-url memq://", dir);
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("map file 'missing.yaml' not found"), std::string::npos) << r.err;
+  std::ofstream(dir.file("bad.yaml")) << "image: x.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n";
+  r = test::RunCommand(bin + " --localize bad.yaml --lcm-url memq://", dir);
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("x.pgm"), std::string::npos) << r.err;
+  r = test::RunCommand(bin + " --localize=", dir);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.err.find("--localize MAP.yaml"), std::string::npos) << r.err;
+  r = test::RunCommand(bin + " --localize m.yaml --no-odometry", dir);
+  EXPECT_EQ(r.status, 2);
+  // A map without any obstacle: nothing to localize against.
+  OccupancyMap empty;
+  empty.width = empty.height = 4;
+  empty.cells.assign(16, 0);
+  maps::SaveOccupancyGrid(OccupancyMapToLcm(0, empty), dir.file("empty"));
+  r = test::RunCommand(bin + " --localize empty.yaml --lcm-url memq://", dir);
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.err.find("no occupied cell"), std::string::npos) << r.err;
 }
 
 }  // namespace

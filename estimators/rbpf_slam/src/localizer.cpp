@@ -85,6 +85,7 @@ Status LocalizerOptions::Validate() const {
   FL_LOC_RETURN_IF_ERROR(Positive("global_step_rad", global_step_rad));
   if (global_step_rad > M_PI) return Status::Error("global_step_rad must be at most pi");
   if (global_beams < 3) return Status::Error("global_beams must be >= 3");
+  FL_LOC_RETURN_IF_ERROR(Positive("global_sigma", global_sigma));
   if (global_hypotheses < 1 || global_hypotheses > max_particles) {
     return Status::Error("global_hypotheses = " + std::to_string(global_hypotheses) +
                          " must be in [1, max_particles]");
@@ -287,11 +288,13 @@ void MonteCarloLocalizer::InitializeGlobal(const std::vector<Eigen::Vector2d>& p
   const auto worse = [](const Candidate& a, const Candidate& b) { return a.first > b.first; };
   std::priority_queue<Candidate, std::vector<Candidate>, decltype(worse)> best(worse);
   const size_t keep = static_cast<size_t>(opt_.global_hypotheses);
+  MatcherOptions scoring = opt_.matcher;
+  scoring.sigma = opt_.global_sigma;
   for (int h = 0; h < headings; ++h) {
     const double theta = -M_PI + 2.0 * M_PI * h / headings;
     for (const Eigen::Vector2d& c : free_cells_) {
       const fl::Pose2 pose(c.x(), c.y(), theta);
-      const double score = ScanLogLikelihood(grid_, sub, pose, opt_.matcher);
+      const double score = ScanLogLikelihood(grid_, sub, pose, scoring);
       if (best.size() < keep) {
         best.emplace(score, pose);
       } else if (score > best.top().first) {

@@ -79,6 +79,9 @@ struct LocalizerOptions {
   double global_step_m = 0.25;    // [m] lattice step of the candidate positions (free cells)
   double global_step_rad = 0.1;   // [rad] heading step of the candidates
   int global_beams = 60;          // [-] beams (evenly spread) scoring each candidate
+  double global_sigma = 0.15;     // [m] std of the likelihood field scoring the candidates: wider
+                                  //     than matcher.sigma, since a candidate on the lattice is
+                                  //     up to half a step (and half a heading step) off
   int global_hypotheses = 200;    // [-] best candidates refined by scan matching: the particles
   // ---- lost / wrong initial pose ----
   double lost_log_likelihood = -0.5;  // [-] a filter update whose best particle fits the scan
@@ -122,6 +125,7 @@ struct LocalizerOptions {
     a->Visit("global_step_m", &global_step_m);
     a->Visit("global_step_rad", &global_step_rad);
     a->Visit("global_beams", &global_beams);
+    a->Visit("global_sigma", &global_sigma);
     a->Visit("global_hypotheses", &global_hypotheses);
     a->Visit("lost_log_likelihood", &lost_log_likelihood);
     a->Visit("lost_updates", &lost_updates);
