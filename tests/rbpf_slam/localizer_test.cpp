@@ -632,5 +632,53 @@ TEST(LocalizerProcess, BadMapFilesAndFlagsExitWithTheReason) {
   EXPECT_NE(r.err.find("no occupied cell"), std::string::npos) << r.err;
 }
 
+// A noisy laser (10 cm of range noise, the simulator's URG-04LX): with the likelihood field's
+// std at the noise (matcher.sigma 0.1 instead of 0.05), the right pose fits above the default
+// lost_log_likelihood (-0.5) all along, and a wrong initial pose below it. (With 0.05 the right
+// pose fits at -0.6 .. -1.1 and the wrong one at -1.0 .. -1.4: no threshold separates them.)
+TEST(Localizer, ANoisyLaserWithTheFieldAtItsNoiseTracksAndRejectsAWrongInitialPose) {
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 16;
+  lo.range_noise = 0.1;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  LocalizerOptions o;  // the defaults ...
+  o.max_range = 25.0;
+  o.matcher.sigma = 0.1;  // ... with the field at the laser's noise
+  {
+    MonteCarloLocalizer loc(o, ExactRoom());
+    ASSERT_TRUE(loc.SetInitialPose(run.truth[0]).ok());
+    const Output out = Localize(&loc, run, lo, run.odom);
+    double worst_fit = 0.0;
+    for (const auto& r : out.results) {
+      if (r.processed) worst_fit = std::min(worst_fit, r.fit);
+    }
+    const double ate = Ate(out.utimes, out.poses, out.truth);
+    std::printf("10 cm laser, sigma 0.1: ATE %.4f m, worst fit %.2f\n", ate, worst_fit);
+    EXPECT_LE(ate, 0.05);
+    EXPECT_GT(worst_fit, o.lost_log_likelihood);
+    EXPECT_EQ(loc.stats().bad_updates, 0);
+  }
+  {
+    MonteCarloLocalizer loc(o, ExactRoom());
+    ASSERT_TRUE(
+        loc.SetInitialPose(fl::Pose2(run.truth[0].x + 3.0, run.truth[0].y, run.truth[0].theta))
+            .ok());
+    const Output out = Localize(&loc, run, lo, run.odom);
+    size_t rejected = out.poses.size();
+    for (size_t k = 0; k < out.poses.size() && rejected == out.poses.size(); ++k) {
+      if (out.results[k].initial_pose_rejected) rejected = k;
+      EXPECT_TRUE(out.results[k].factors.empty()) << k;
+    }
+    ASSERT_LT(rejected, out.poses.size());
+    const double seconds = 1e-6 * static_cast<double>(out.utimes[rejected] - out.utimes[0]);
+    std::printf("10 cm laser, wrong initial pose: rejected after %.1f s of data\n", seconds);
+    EXPECT_LE(seconds, 3.0);
+    for (size_t k = out.poses.size() / 2; k < out.poses.size(); ++k) {
+      ASSERT_LT(Distance(out.poses[k], out.truth[k]), 0.15) << k;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fl::rbpf
