@@ -95,9 +95,10 @@ OccupancyMap ExactRoom() {
 }
 
 // The fixture's laser has 1 cm of range noise: on the right pose a scan fits at -0.01 .. -0.09
-// per beam (exact map and SLAM map alike), while the pose 3 m ahead in the same corridor
-// (AWrongInitialPoseIsRejectedNotFollowed) still fits at -0.44 .. -0.92, its walls lining up
-// with the corridor's. The default lost_log_likelihood (-0.5) is for lasers of a few cm.
+// per beam (OnAnExactMapTheErrorIsTheLocalizersOwn), while the pose 3 m ahead in the same
+// corridor (AWrongInitialPoseIsRejectedNotFollowed) fits at -0.60 .. -0.92 until it is
+// rejected, its walls lining up with the corridor's: the tests use -0.3, midway, rather than
+// the default -0.5, which the wrong pose approaches as the filter slides.
 LocalizerOptions TestOptions() {
   LocalizerOptions o;
   o.max_range = 25.0;
@@ -140,6 +141,17 @@ double Ate(const std::vector<fl::Utime>& t, const std::vector<fl::Pose2>& est,
 }
 
 double Distance(const fl::Pose2& a, const fl::Pose2& b) { return std::hypot(a.x - b.x, a.y - b.y); }
+
+// The range of the fits (mean log-likelihood per beam) of the filter updates in [from, to).
+std::pair<double, double> FitRange(const Output& out, size_t from, size_t to) {
+  double lo = 0.0, hi = -1e9;
+  for (size_t k = from; k < to && k < out.results.size(); ++k) {
+    if (!out.results[k].processed) continue;
+    lo = std::min(lo, out.results[k].fit);
+    hi = std::max(hi, out.results[k].fit);
+  }
+  return {lo, hi};
+}
 
 TEST(Localizer, KldBoundGrowsWithTheOccupiedBins) {
   EXPECT_EQ(MonteCarloLocalizer::KldParticleCount(1, 0.05, 2.33), 1);
@@ -258,8 +270,10 @@ TEST(Localizer, OnAnExactMapTheErrorIsTheLocalizersOwn) {
   }
   const double ate = Ate(out.utimes, out.poses, out.truth);
   const double ate_updates = Ate(t, updated, truth);
-  std::printf("exact map: ATE %.4f m over every scan, %.4f m at the filter updates\n", ate,
-              ate_updates);
+  const auto fits = FitRange(out, 0, out.results.size());
+  std::printf("exact map: ATE %.4f m over every scan, %.4f m at the filter updates; fit on the "
+              "right pose %.2f .. %.2f\n",
+              ate, ate_updates, fits.first, fits.second);
   EXPECT_LE(ate, 0.02);
   EXPECT_LE(ate_updates, 0.01);
 }
@@ -439,9 +453,10 @@ TEST(Localizer, AWrongInitialPoseIsRejectedNotFollowed) {
         ASSERT_LT(Distance(out.poses[k], out.truth[k]), 0.1) << k;
       }
       EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
-      std::printf("wrong initial pose (3 m off): rejected after %.1f s of data, then found "
-                  "globally\n",
-                  seconds);
+      const auto fits = FitRange(out, 0, rejected + 1);
+      std::printf("wrong initial pose (3 m off): fit %.2f .. %.2f, rejected after %.1f s of "
+                  "data, then found globally\n",
+                  fits.first, fits.second, seconds);
     } else {
       EXPECT_EQ(out.results[rejected].state, LocalizerState::kLost);
       // Reported as localized again only where the scans fit the map.
@@ -635,7 +650,7 @@ TEST(LocalizerProcess, BadMapFilesAndFlagsExitWithTheReason) {
 // A noisy laser (10 cm of range noise, the simulator's URG-04LX): with the likelihood field's
 // std at the noise (matcher.sigma 0.1 instead of 0.05), the right pose fits above the default
 // lost_log_likelihood (-0.5) all along, and a wrong initial pose below it. (With 0.05 the right
-// pose fits at -0.6 .. -1.1 and the wrong one at -1.0 .. -1.4: no threshold separates them.)
+// pose fits at -0.59 .. -1.13 and the wrong one at -1.01 .. -1.35: they overlap.)
 TEST(Localizer, ANoisyLaserWithTheFieldAtItsNoiseTracksAndRejectsAWrongInitialPose) {
   test::LoopRunOptions lo;
   lo.step_m = 0.1;
@@ -649,12 +664,11 @@ TEST(Localizer, ANoisyLaserWithTheFieldAtItsNoiseTracksAndRejectsAWrongInitialPo
     MonteCarloLocalizer loc(o, ExactRoom());
     ASSERT_TRUE(loc.SetInitialPose(run.truth[0]).ok());
     const Output out = Localize(&loc, run, lo, run.odom);
-    double worst_fit = 0.0;
-    for (const auto& r : out.results) {
-      if (r.processed) worst_fit = std::min(worst_fit, r.fit);
-    }
+    const auto fits = FitRange(out, 0, out.results.size());
+    const double worst_fit = fits.first;
     const double ate = Ate(out.utimes, out.poses, out.truth);
-    std::printf("10 cm laser, sigma 0.1: ATE %.4f m, worst fit %.2f\n", ate, worst_fit);
+    std::printf("10 cm laser, sigma 0.1: ATE %.4f m, fit on the right pose %.2f .. %.2f\n", ate,
+                fits.first, fits.second);
     EXPECT_LE(ate, 0.05);
     EXPECT_GT(worst_fit, o.lost_log_likelihood);
     EXPECT_EQ(loc.stats().bad_updates, 0);
@@ -672,12 +686,36 @@ TEST(Localizer, ANoisyLaserWithTheFieldAtItsNoiseTracksAndRejectsAWrongInitialPo
     }
     ASSERT_LT(rejected, out.poses.size());
     const double seconds = 1e-6 * static_cast<double>(out.utimes[rejected] - out.utimes[0]);
-    std::printf("10 cm laser, wrong initial pose: rejected after %.1f s of data\n", seconds);
+    const auto fits = FitRange(out, 0, rejected + 1);
+    std::printf("10 cm laser, sigma 0.1, wrong initial pose: fit %.2f .. %.2f, rejected after "
+                "%.1f s of data\n",
+                fits.first, fits.second, seconds);
     EXPECT_LE(seconds, 3.0);
     for (size_t k = out.poses.size() / 2; k < out.poses.size(); ++k) {
       ASSERT_LT(Distance(out.poses[k], out.truth[k]), 0.15) << k;
     }
   }
+  // With the field at the default 0.05 m the two overlap: the right pose over the whole run,
+  // the wrong one over its first 12 updates (before the filter slides off it).
+  o.matcher.sigma = 0.05;
+  o.relocalize = false;
+  o.lost_log_likelihood = -100.0;
+  std::pair<double, double> right, wrong;
+  for (const bool at_truth : {true, false}) {
+    MonteCarloLocalizer loc(o, ExactRoom());
+    const fl::Pose2 t0 = run.truth[0];
+    ASSERT_TRUE(loc.SetInitialPose(fl::Pose2(t0.x + (at_truth ? 0.0 : 3.0), t0.y, t0.theta)).ok());
+    const Output out = Localize(&loc, run, lo, run.odom);
+    size_t twelfth = 0;
+    for (int n = 0; twelfth < out.results.size() && n < 12; ++twelfth) {
+      if (out.results[twelfth].processed) ++n;
+    }
+    (at_truth ? right : wrong) = FitRange(out, 0, at_truth ? out.results.size() : twelfth);
+  }
+  std::printf("10 cm laser, sigma 0.05: right pose %.2f .. %.2f, 3 m ahead (first 12 updates) "
+              "%.2f .. %.2f\n",
+              right.first, right.second, wrong.first, wrong.second);
+  EXPECT_LT(right.first, wrong.second);  // they overlap
 }
 
 }  // namespace
