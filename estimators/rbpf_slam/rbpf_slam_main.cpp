@@ -66,12 +66,11 @@ int LocalizeMain(int argc, char** argv) {
     } catch (const std::invalid_argument& e) {
       throw fl::maps::MapLoadError("map '" + map_path + "': " + e.what());
     }
-    FL_LOG(INFO) << "map " << map_path << ": " << map.width << " x " << map.height
-                 << " cells at " << map.resolution << " m";
+    FL_LOG(INFO) << "map " << map_path << ": " << map.width << " x " << map.height << " cells at "
+                 << map.resolution << " m";
     return process.Run([&](fl::LcmInterface* lcm, const fl::ChannelMap& channels) {
       try {
-        return std::make_unique<LocalizerNode>(options, node_options, map, map_path, lcm,
-                                               channels);
+        return std::make_unique<LocalizerNode>(options, node_options, map, map_path, lcm, channels);
       } catch (const std::invalid_argument& e) {
         throw fl::maps::MapLoadError("map '" + map_path + "': " + e.what());
       }

@@ -62,9 +62,10 @@ TEST(MapLoad, ExportThenLoadGivesTheSameOccupancy) {
   const GridExportOptions o;
   for (size_t i = 0; i < g.cells.size(); ++i) {
     const int v = g.cells[i];
-    const int expected = v < 0 ? -1 : v >= o.occupied_min_percent ? 100
-                                     : v <= o.free_max_percent    ? 0
-                                                                  : -1;
+    const int expected = v < 0                         ? -1
+                         : v >= o.occupied_min_percent ? 100
+                         : v <= o.free_max_percent     ? 0
+                                                       : -1;
     EXPECT_EQ(back.cells[i], expected) << "cell " << i << " (" << v << " %)";
   }
   // Loading is idempotent: exporting what was loaded writes the same files.
@@ -85,8 +86,7 @@ TEST(MapLoad, ReadsAsciiPgmNegateScaleAndRawLikeMapServer) {
   EXPECT_DOUBLE_EQ(g.origin_x, 1.0);
   EXPECT_DOUBLE_EQ(g.origin_y, -2.0);
   // negate: 1 swaps black and white.
-  Write(dir.file("n.yaml"),
-        "image: m.pgm\nresolution: 0.1\norigin: [1.0, -2.0, 0.0]\nnegate: 1\n");
+  Write(dir.file("n.yaml"), "image: m.pgm\nresolution: 0.1\norigin: [1.0, -2.0, 0.0]\nnegate: 1\n");
   g = LoadOccupancyGrid(dir.file("n.yaml"));
   EXPECT_EQ(g.cells[0], 0);
   EXPECT_EQ(g.cells[1], 100);
@@ -113,8 +113,7 @@ TEST(MapLoad, BadFilesGiveErrorsNamingTheFileAndTheFix) {
   Write(dir.file("typo.yaml"), "image: m.pgm\nresolutoin: 0.05\norigin: [0, 0, 0]\n");
   e = LoadError(dir.file("typo.yaml"));
   EXPECT_NE(e.find("typo.yaml:2"), std::string::npos) << e;
-  EXPECT_NE(e.find("unknown key 'resolutoin'; did you mean 'resolution'?"), std::string::npos)
-      << e;
+  EXPECT_NE(e.find("unknown key 'resolutoin'; did you mean 'resolution'?"), std::string::npos) << e;
   // Missing keys.
   Write(dir.file("nores.yaml"), "image: m.pgm\norigin: [0, 0, 0]\n");
   e = LoadError(dir.file("nores.yaml"));
@@ -156,8 +155,7 @@ TEST(MapLoad, BadFilesGiveErrorsNamingTheFileAndTheFix) {
   Write(dir.file("t.pgm"), "P5\n4 4\n255\nabc");
   Write(dir.file("trunc.yaml"), "image: t.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n");
   e = LoadError(dir.file("trunc.yaml"));
-  EXPECT_NE(e.find("truncated: 4 x 4 needs 16 bytes of pixels, the file has 3"),
-            std::string::npos)
+  EXPECT_NE(e.find("truncated: 4 x 4 needs 16 bytes of pixels, the file has 3"), std::string::npos)
       << e;
   Write(dir.file("h.pgm"), "P5\nfour 4\n255\n");
   Write(dir.file("head.yaml"), "image: h.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n");

@@ -16,9 +16,6 @@
 #include "bot_core/pose_t.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/yaml_options.hpp"
-#include "fusionloc/relative_pose_factor_t.hpp"
-#include "fusionloc/status_t.hpp"
-#include "fusionloc/wheel_odometry_t.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/maps/map_export.hpp"
 #include "fusionloc/maps/map_load.hpp"
@@ -26,6 +23,9 @@
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
 #include "fusionloc/rbpf_slam/rbpf_slam_lcm.hpp"
 #include "fusionloc/rbpf_slam/scan_matcher.hpp"
+#include "fusionloc/relative_pose_factor_t.hpp"
+#include "fusionloc/status_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 #include "laser_fixtures.hpp"
 #include "test_paths.hpp"
 
@@ -109,7 +109,7 @@ LocalizerOptions TestOptions() {
 // A localization run: the scans of `run` from index `from` on, with the odometry of `odom`.
 struct Output {
   std::vector<fl::Utime> utimes;
-  std::vector<fl::Pose2> poses;   // T_map_base at every scan
+  std::vector<fl::Pose2> poses;  // T_map_base at every scan
   std::vector<fl::Pose2> truth;
   std::vector<LocalizationResult> results;
 };
@@ -180,8 +180,7 @@ TEST(Localizer, OptionsValidateAndTheConfigFileLoads) {
   o.global_hypotheses = 5000;
   EXPECT_NE(o.Validate().message().find("global_hypotheses"), std::string::npos);
   // The shipped file holds the defaults, and every key is known.
-  const auto file =
-      LoadYamlFile<LocalizerOptions>(test::SourceDir() + "/config/localizer.yaml");
+  const auto file = LoadYamlFile<LocalizerOptions>(test::SourceDir() + "/config/localizer.yaml");
   EXPECT_EQ(SaveYamlString(file), SaveYamlString(LocalizerOptions()));
   EXPECT_THROW(LoadYamlString<LocalizerOptions>("min_particle: 3\n"), ConfigError);
 }
@@ -215,12 +214,13 @@ TEST(Localizer, LocalizesAnotherRunOfAMappedWorldWithin5cm) {
     worst = std::max(worst, Distance(out.poses[k], out.truth[k]));
   }
   const auto& s = loc.stats();
-  std::printf("localization: %zu scans, %lld updates, ATE %.4f m (SE(2)-aligned), worst %.3f m "
-              "(unaligned, after the first second), particles at the end %d (max %d), factors "
-              "%lld, odometry ATE %.3f m\n",
-              out.poses.size(), static_cast<long long>(s.processed), ate, worst,
-              loc.num_particles(), s.max_particles_used, static_cast<long long>(s.factors),
-              Ate(out.utimes, run.odom, out.truth));
+  std::printf(
+      "localization: %zu scans, %lld updates, ATE %.4f m (SE(2)-aligned), worst %.3f m "
+      "(unaligned, after the first second), particles at the end %d (max %d), factors "
+      "%lld, odometry ATE %.3f m\n",
+      out.poses.size(), static_cast<long long>(s.processed), ate, worst, loc.num_particles(),
+      s.max_particles_used, static_cast<long long>(s.factors),
+      Ate(out.utimes, run.odom, out.truth));
   EXPECT_LE(ate, 0.05);
   EXPECT_LT(worst, 0.25);
   EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
@@ -237,8 +237,8 @@ TEST(Localizer, LocalizesAnotherRunOfAMappedWorldWithin5cm) {
     for (const KeyframeFactor& f : out.results[k].factors) {
       EXPECT_EQ(f.keyframe_j, f.keyframe_i + 1);
       EXPECT_EQ(f.utime_j, out.utimes[k]);
-      const size_t i = static_cast<size_t>(std::find(out.utimes.begin(), out.utimes.end(),
-                                                     f.utime_i) - out.utimes.begin());
+      const size_t i = static_cast<size_t>(
+          std::find(out.utimes.begin(), out.utimes.end(), f.utime_i) - out.utimes.begin());
       ASSERT_LT(i, k);
       const fl::Pose2 truth = out.truth[i].between(out.truth[k]);
       EXPECT_LT(Distance(truth, f.T_i_j), 0.1);
@@ -271,9 +271,10 @@ TEST(Localizer, OnAnExactMapTheErrorIsTheLocalizersOwn) {
   const double ate = Ate(out.utimes, out.poses, out.truth);
   const double ate_updates = Ate(t, updated, truth);
   const auto fits = FitRange(out, 0, out.results.size());
-  std::printf("exact map: ATE %.4f m over every scan, %.4f m at the filter updates; fit on the "
-              "right pose %.2f .. %.2f\n",
-              ate, ate_updates, fits.first, fits.second);
+  std::printf(
+      "exact map: ATE %.4f m over every scan, %.4f m at the filter updates; fit on the "
+      "right pose %.2f .. %.2f\n",
+      ate, ate_updates, fits.first, fits.second);
   EXPECT_LE(ate, 0.02);
   EXPECT_LE(ate_updates, 0.01);
 }
@@ -324,9 +325,10 @@ TEST(Localizer, GlobalInitialisationFindsTheRobotWithoutAnInitialPose) {
   }
   ASSERT_LT(settled, out.poses.size());
   const double seconds = 1e-6 * static_cast<double>(out.utimes[settled] - out.utimes[0]);
-  std::printf("global initialisation: %d hypotheses -> within 0.1 m for good after %.1f s of "
-              "data; particles at the end %d\n",
-              out.results[0].particles, seconds, loc.num_particles());
+  std::printf(
+      "global initialisation: %d hypotheses -> within 0.1 m for good after %.1f s of "
+      "data; particles at the end %d\n",
+      out.results[0].particles, seconds, loc.num_particles());
   EXPECT_LE(seconds, 2.0);
   EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
   EXPECT_EQ(loc.stats().global_initializations, 1);
@@ -396,14 +398,14 @@ TEST(Localizer, AKidnappedRobotIsFoundAgainWithin10SecondsOfData) {
   ASSERT_LT(settled, out.poses.size()) << "not recovered";
   const double detect_s = 1e-6 * static_cast<double>(out.utimes[lost_at] - out.utimes[j]);
   const double recover_s = 1e-6 * static_cast<double>(out.utimes[settled] - out.utimes[j]);
-  std::printf("kidnapped %.2f m: detected after %.1f s, within 0.1 m for good after %.1f s of "
-              "data (%zu s of data after it); lost %lld, global initialisations %lld, particles "
-              "at most %d\n",
-              kr.jump_m, detect_s, recover_s,
-              static_cast<size_t>(1e-6 * static_cast<double>(out.utimes.back() - out.utimes[j])),
-              static_cast<long long>(loc.stats().lost_detections),
-              static_cast<long long>(loc.stats().global_initializations),
-              loc.stats().max_particles_used);
+  std::printf(
+      "kidnapped %.2f m: detected after %.1f s, within 0.1 m for good after %.1f s of "
+      "data (%zu s of data after it); lost %lld, global initialisations %lld, particles "
+      "at most %d\n",
+      kr.jump_m, detect_s, recover_s,
+      static_cast<size_t>(1e-6 * static_cast<double>(out.utimes.back() - out.utimes[j])),
+      static_cast<long long>(loc.stats().lost_detections),
+      static_cast<long long>(loc.stats().global_initializations), loc.stats().max_particles_used);
   EXPECT_GE(kr.jump_m, 5.0);
   EXPECT_LT(kr.jump_m, 5.2);
   EXPECT_LE(recover_s, 10.0);
@@ -412,7 +414,8 @@ TEST(Localizer, AKidnappedRobotIsFoundAgainWithin10SecondsOfData) {
   EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
   // No factor spans the kidnapping: the chain restarts after the relocalization.
   for (size_t k = j; k < out.poses.size(); ++k) {
-    for (const KeyframeFactor& f : out.results[k].factors) EXPECT_GE(f.utime_i, out.utimes[lost_at]);
+    for (const KeyframeFactor& f : out.results[k].factors)
+      EXPECT_GE(f.utime_i, out.utimes[lost_at]);
   }
 }
 
@@ -454,9 +457,10 @@ TEST(Localizer, AWrongInitialPoseIsRejectedNotFollowed) {
       }
       EXPECT_EQ(loc.state(), LocalizerState::kLocalized);
       const auto fits = FitRange(out, 0, rejected + 1);
-      std::printf("wrong initial pose (3 m off): fit %.2f .. %.2f, rejected after %.1f s of "
-                  "data, then found globally\n",
-                  fits.first, fits.second, seconds);
+      std::printf(
+          "wrong initial pose (3 m off): fit %.2f .. %.2f, rejected after %.1f s of "
+          "data, then found globally\n",
+          fits.first, fits.second, seconds);
     } else {
       EXPECT_EQ(out.results[rejected].state, LocalizerState::kLost);
       // Reported as localized again only where the scans fit the map.
@@ -466,12 +470,12 @@ TEST(Localizer, AWrongInitialPoseIsRejectedNotFollowed) {
         if (wrong) last_wrong = k;
         if (wrong && out.results[k].state == LocalizerState::kLocalized) ++localized_wrong;
       }
-      std::printf("wrong initial pose (3 m off), relocalize off: rejected after %.1f s, state "
-                  "%s at the end, %.3f m off; last scan more than 0.1 m off: %zu of %zu; "
-                  "scans more than 0.1 m off reported as localized: %zu\n",
-                  seconds, LocalizerStateName(loc.state()),
-                  Distance(out.poses.back(), out.truth.back()), last_wrong, out.poses.size(),
-                  localized_wrong);
+      std::printf(
+          "wrong initial pose (3 m off), relocalize off: rejected after %.1f s, state "
+          "%s at the end, %.3f m off; last scan more than 0.1 m off: %zu of %zu; "
+          "scans more than 0.1 m off reported as localized: %zu\n",
+          seconds, LocalizerStateName(loc.state()), Distance(out.poses.back(), out.truth.back()),
+          last_wrong, out.poses.size(), localized_wrong);
       EXPECT_EQ(localized_wrong, 0u);
     }
   }
@@ -518,8 +522,9 @@ ProcessRun RunLocalizeProcess(const test::TempDir& dir, const fl::Pose2& initial
     }
     w.Close();
   }
-  out.result = test::RunCommand(test::BinDir() + "/fl-rbpf-slam --localize room.yaml "
-                                "--mounting-wait-s 0 --lcm-url log:in.lcmlog,out.lcmlog",
+  out.result = test::RunCommand(test::BinDir() +
+                                    "/fl-rbpf-slam --localize room.yaml "
+                                    "--mounting-wait-s 0 --lcm-url log:in.lcmlog,out.lcmlog",
                                 dir);
   if (out.result.status != 0) return out;
   LcmLogReader r(dir.file("out.lcmlog"));
@@ -687,9 +692,10 @@ TEST(Localizer, ANoisyLaserWithTheFieldAtItsNoiseTracksAndRejectsAWrongInitialPo
     ASSERT_LT(rejected, out.poses.size());
     const double seconds = 1e-6 * static_cast<double>(out.utimes[rejected] - out.utimes[0]);
     const auto fits = FitRange(out, 0, rejected + 1);
-    std::printf("10 cm laser, sigma 0.1, wrong initial pose: fit %.2f .. %.2f, rejected after "
-                "%.1f s of data\n",
-                fits.first, fits.second, seconds);
+    std::printf(
+        "10 cm laser, sigma 0.1, wrong initial pose: fit %.2f .. %.2f, rejected after "
+        "%.1f s of data\n",
+        fits.first, fits.second, seconds);
     EXPECT_LE(seconds, 3.0);
     for (size_t k = out.poses.size() / 2; k < out.poses.size(); ++k) {
       ASSERT_LT(Distance(out.poses[k], out.truth[k]), 0.15) << k;
@@ -712,9 +718,10 @@ TEST(Localizer, ANoisyLaserWithTheFieldAtItsNoiseTracksAndRejectsAWrongInitialPo
     }
     (at_truth ? right : wrong) = FitRange(out, 0, at_truth ? out.results.size() : twelfth);
   }
-  std::printf("10 cm laser, sigma 0.05: right pose %.2f .. %.2f, 3 m ahead (first 12 updates) "
-              "%.2f .. %.2f\n",
-              right.first, right.second, wrong.first, wrong.second);
+  std::printf(
+      "10 cm laser, sigma 0.05: right pose %.2f .. %.2f, 3 m ahead (first 12 updates) "
+      "%.2f .. %.2f\n",
+      right.first, right.second, wrong.first, wrong.second);
   EXPECT_LT(right.first, wrong.second);  // they overlap
 }
 

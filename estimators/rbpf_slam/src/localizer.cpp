@@ -130,8 +130,8 @@ TiledGrid GridFromOccupancyMap(const OccupancyMap& map, const GridOptions& grid_
     throw std::invalid_argument("occupancy map origin is too far from the frame's origin");
   }
   if (offset) {
-    *offset = Eigen::Vector2d(map.origin_x - ox * map.resolution,
-                              map.origin_y - oy * map.resolution);
+    *offset =
+        Eigen::Vector2d(map.origin_x - ox * map.resolution, map.origin_y - oy * map.resolution);
   }
   TiledGrid grid(g);
   const int full = static_cast<int>(std::lround(g.log_odds_clamp * kLogOddsScale));
@@ -196,12 +196,11 @@ Status MonteCarloLocalizer::SetInitialPose(const fl::Pose2& T_map_base) {
   const fl::Pose2 g = ToGrid(T_map_base);
   const double r = grid_.resolution();
   if (g.x < x0 * r || g.x >= x1 * r || g.y < y0 * r || g.y >= y1 * r) {
-    return Status::Error("initial pose (" + FormatDouble(T_map_base.x) + ", " +
-                         FormatDouble(T_map_base.y) + ") is outside the map (x " +
-                         FormatDouble(x0 * r + offset_.x()) + " .. " +
-                         FormatDouble(x1 * r + offset_.x()) + ", y " +
-                         FormatDouble(y0 * r + offset_.y()) + " .. " +
-                         FormatDouble(y1 * r + offset_.y()) + "); ignored");
+    return Status::Error(
+        "initial pose (" + FormatDouble(T_map_base.x) + ", " + FormatDouble(T_map_base.y) +
+        ") is outside the map (x " + FormatDouble(x0 * r + offset_.x()) + " .. " +
+        FormatDouble(x1 * r + offset_.x()) + ", y " + FormatDouble(y0 * r + offset_.y()) + " .. " +
+        FormatDouble(y1 * r + offset_.y()) + "); ignored");
   }
   pending_initial_pose_ = fl::Pose2(T_map_base.x, T_map_base.y, WrapAngle(T_map_base.theta));
   return Status::Ok();
@@ -256,10 +255,10 @@ void MonteCarloLocalizer::InitializeAround(const fl::Pose2& T_map_base) {
   const fl::Pose2 g = ToGrid(T_map_base);
   particles_.clear();
   for (int i = 0; i < opt_.min_particles; ++i) {
-    particles_.push_back({fl::Pose2(g.x + opt_.initial_sigma_xy * n01(rng_),
-                                    g.y + opt_.initial_sigma_xy * n01(rng_),
-                                    WrapAngle(g.theta + opt_.initial_sigma_theta * n01(rng_))),
-                          0.0});
+    particles_.push_back(
+        {fl::Pose2(g.x + opt_.initial_sigma_xy * n01(rng_), g.y + opt_.initial_sigma_xy * n01(rng_),
+                   WrapAngle(g.theta + opt_.initial_sigma_theta * n01(rng_))),
+         0.0});
   }
   estimate_ = g;
   state_ = LocalizerState::kConverging;
@@ -388,9 +387,8 @@ int MonteCarloLocalizer::ResampleKld() {
     bins.insert({static_cast<int64_t>(std::floor(p.x / opt_.kld_bin_xy)),
                  static_cast<int64_t>(std::floor(p.y / opt_.kld_bin_xy)),
                  static_cast<int64_t>(std::floor((p.theta + M_PI) / opt_.kld_bin_theta))});
-    const int needed =
-        std::max(opt_.min_particles,
-                 KldParticleCount(static_cast<int>(bins.size()), opt_.kld_epsilon, opt_.kld_z));
+    const int needed = std::max(opt_.min_particles, KldParticleCount(static_cast<int>(bins.size()),
+                                                                     opt_.kld_epsilon, opt_.kld_z));
     if (static_cast<int>(next.size()) >= needed) break;
   }
   particles_ = std::move(next);
@@ -519,10 +517,10 @@ Status MonteCarloLocalizer::AddScan(const LaserScan& scan, const fl::Pose2& odom
   } else if (particles_.empty()) {
     InitializeGlobal(match_base_);
     res->global_initialization = true;
-    fit = particles_.empty() ? -std::numeric_limits<double>::infinity()
-                             : ScanLogLikelihood(grid_, match_base_, particles_[BestIndex()].pose,
-                                                 opt_.matcher) /
-                                   static_cast<double>(std::max<size_t>(1, match_base_.size()));
+    fit = particles_.empty()
+              ? -std::numeric_limits<double>::infinity()
+              : ScanLogLikelihood(grid_, match_base_, particles_[BestIndex()].pose, opt_.matcher) /
+                    static_cast<double>(std::max<size_t>(1, match_base_.size()));
   } else {
     Predict(delta, pending_jump_);
     fit = Correct(match_base_);
@@ -598,8 +596,7 @@ void MonteCarloLocalizer::MaybeAddFactor(fl::Utime utime, const fl::Pose2& pose,
   cov(2, 2) += opt_.factor_floor_sigma_theta * opt_.factor_floor_sigma_theta;
   if (have_keyframe_) {
     const fl::Pose2 d = keyframe_pose_.between(pose);
-    if (std::hypot(d.x, d.y) < opt_.keyframe_distance &&
-        std::abs(d.theta) < opt_.keyframe_angle) {
+    if (std::hypot(d.x, d.y) < opt_.keyframe_distance && std::abs(d.theta) < opt_.keyframe_angle) {
       return;
     }
     // Covariance of T_i_j = T_i^-1 T_j from the two poses' (independent) covariances, in the

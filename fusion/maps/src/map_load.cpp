@@ -79,8 +79,7 @@ Pgm ReadPgm(const std::string& path, const std::string& yaml_path) {
   };
   const auto number = [&](const char* what) {
     const std::string t = token();
-    if (t.empty() || t.size() > 9 ||
-        t.find_first_not_of("0123456789") != std::string::npos) {
+    if (t.empty() || t.size() > 9 || t.find_first_not_of("0123456789") != std::string::npos) {
       throw MapLoadError("map image '" + path + "': bad PGM header (" + what + " is '" + t +
                          "', expected a positive integer): the file is damaged or not a PGM");
     }
@@ -172,7 +171,8 @@ fusionloc::occupancy_grid_t LoadOccupancyGrid(const std::string& yaml_path) {
   }
   if (std::isnan(y.resolution)) throw bad("missing key 'resolution' (metres per cell)");
   if (!(y.resolution > 0.0) || !std::isfinite(y.resolution)) {
-    throw bad("resolution = " + FormatDouble(y.resolution) + " must be a positive number of metres");
+    throw bad("resolution = " + FormatDouble(y.resolution) +
+              " must be a positive number of metres");
   }
   if (y.origin.size() != 3) {
     throw bad(y.origin.empty() ? "missing key 'origin' ([x, y, yaw] of the lower-left corner)"

@@ -21,10 +21,10 @@ OccupancyMap OccupancyMapFromLcm(const fusionloc::occupancy_grid_t& g) {
   }
   const int64_t n = static_cast<int64_t>(g.width) * g.height;
   if (g.num_cells != n || static_cast<int64_t>(g.cells.size()) != n) {
-    throw std::invalid_argument("occupancy grid is inconsistent: width*height = " +
-                                std::to_string(n) + " but num_cells = " +
-                                std::to_string(g.num_cells) + " and " +
-                                std::to_string(g.cells.size()) + " cells");
+    throw std::invalid_argument(
+        "occupancy grid is inconsistent: width*height = " + std::to_string(n) +
+        " but num_cells = " + std::to_string(g.num_cells) + " and " +
+        std::to_string(g.cells.size()) + " cells");
   }
   if (!(g.resolution > 0) || !std::isfinite(g.resolution) || !std::isfinite(g.origin_x) ||
       !std::isfinite(g.origin_y)) {
@@ -168,9 +168,7 @@ LocalizerNode::LocalizerNode(const LocalizerOptions& options,
                    "map " + map_name_ + " loaded; waiting for " + ch_laser_);
 }
 
-std::vector<std::string> LocalizerNode::RequiredInputs() const {
-  return {ch_laser_, ch_odometry_};
-}
+std::vector<std::string> LocalizerNode::RequiredInputs() const { return {ch_laser_, ch_odometry_}; }
 
 void LocalizerNode::OnLaserToBase(const Pose2& T) {
   if (started_) {
@@ -317,9 +315,10 @@ void LocalizerNode::UpdateStatus(const LocalizationResult& r) {
   const std::string state = LocalizerStateName(r.state);
   switch (r.state) {
     case LocalizerState::kLocalized:
-      status_.SetState(fusionloc::status_t::LEVEL_OK,
-                       "localized on " + map_name_ +
-                           (last_event_.empty() ? std::string() : " (earlier: " + last_event_ + ")"));
+      status_.SetState(
+          fusionloc::status_t::LEVEL_OK,
+          "localized on " + map_name_ +
+              (last_event_.empty() ? std::string() : " (earlier: " + last_event_ + ")"));
       break;
     case LocalizerState::kConverging:
       status_.SetState(fusionloc::status_t::LEVEL_WARN,

@@ -49,40 +49,40 @@ namespace fl::rbpf {
 
 // A static occupancy map, as map_server holds it (fusionloc.occupancy_grid_t without LCM).
 struct OccupancyMap {
-  double resolution = 0.05;  // [m] side of a cell
-  double origin_x = 0.0;     // [m] map-frame position of the lower-left corner of cell (0, 0)
-  double origin_y = 0.0;     // [m]
-  int width = 0;             // [cells] along x
-  int height = 0;            // [cells] along y
-  std::vector<int8_t> cells; // row-major from the lowest y: -1 unknown, 0 (free) .. 100 (occupied)
+  double resolution = 0.05;   // [m] side of a cell
+  double origin_x = 0.0;      // [m] map-frame position of the lower-left corner of cell (0, 0)
+  double origin_y = 0.0;      // [m]
+  int width = 0;              // [cells] along x
+  int height = 0;             // [cells] along y
+  std::vector<int8_t> cells;  // row-major from the lowest y: -1 unknown, 0 (free) .. 100 (occupied)
 };
 
 // Options of the localizer (config/localizer.yaml). Every field has its default inline;
 // Validate() explains what is wrong and how to fix it.
 struct LocalizerOptions {
   // ---- particles (KLD sampling, Fox 2003) ----
-  int min_particles = 30;        // [-] fewest particles (the SLAM runs 30 with the same proposal)
-  int max_particles = 1000;      // [-] most particles
-  double kld_epsilon = 0.05;     // [-] bound on the KL divergence between the particle set and
-                                 //     the posterior (AMCL's pf_err)
-  double kld_z = 2.33;           // [-] upper standard-normal quantile of 1 - δ (δ = 0.01; AMCL's
-                                 //     pf_z is 0.99, the same δ)
-  double kld_bin_xy = 0.25;      // [m] KLD histogram bin size in x and y
-  double kld_bin_theta = 0.17;   // [rad] ... and in heading (about 10°)
-  double neff_threshold = 0.5;   // [-] resample when N_eff < neff_threshold * N (as the SLAM)
-  double linear_update = 0.2;    // [m] run the filter only after this much odometry travel ...
-  double angular_update = 0.1;   // [rad] ... or this much rotation (as the SLAM)
+  int min_particles = 30;       // [-] fewest particles (the SLAM runs 30 with the same proposal)
+  int max_particles = 1000;     // [-] most particles
+  double kld_epsilon = 0.05;    // [-] bound on the KL divergence between the particle set and
+                                //     the posterior (AMCL's pf_err)
+  double kld_z = 2.33;          // [-] upper standard-normal quantile of 1 - δ (δ = 0.01; AMCL's
+                                //     pf_z is 0.99, the same δ)
+  double kld_bin_xy = 0.25;     // [m] KLD histogram bin size in x and y
+  double kld_bin_theta = 0.17;  // [rad] ... and in heading (about 10°)
+  double neff_threshold = 0.5;  // [-] resample when N_eff < neff_threshold * N (as the SLAM)
+  double linear_update = 0.2;   // [m] run the filter only after this much odometry travel ...
+  double angular_update = 0.1;  // [rad] ... or this much rotation (as the SLAM)
   // ---- initial pose (INITIAL_POSE is a bot_core.pose_t: no covariance, hence these) ----
   double initial_sigma_xy = 0.3;     // [m] std of the particles drawn around an initial pose
   double initial_sigma_theta = 0.2;  // [rad]
   // ---- global initialisation over the free space (no initial pose, or lost) ----
-  double global_step_m = 0.25;    // [m] lattice step of the candidate positions (free cells)
-  double global_step_rad = 0.1;   // [rad] heading step of the candidates
-  int global_beams = 60;          // [-] beams (evenly spread) scoring each candidate
-  double global_sigma = 0.15;     // [m] std of the likelihood field scoring the candidates: wider
-                                  //     than matcher.sigma, since a candidate on the lattice is
-                                  //     up to half a step (and half a heading step) off
-  int global_hypotheses = 200;    // [-] best candidates refined by scan matching: the particles
+  double global_step_m = 0.25;   // [m] lattice step of the candidate positions (free cells)
+  double global_step_rad = 0.1;  // [rad] heading step of the candidates
+  int global_beams = 60;         // [-] beams (evenly spread) scoring each candidate
+  double global_sigma = 0.15;    // [m] std of the likelihood field scoring the candidates: wider
+                                 //     than matcher.sigma, since a candidate on the lattice is
+                                 //     up to half a step (and half a heading step) off
+  int global_hypotheses = 200;   // [-] best candidates refined by scan matching: the particles
   // ---- lost / wrong initial pose ----
   double lost_log_likelihood = -0.5;  // [-] a filter update whose best particle fits the scan
                                       //     with a mean log-likelihood per beam below this is a
@@ -95,19 +95,19 @@ struct LocalizerOptions {
                                       //     global initialisation (false: keep tracking and
                                       //     report it only)
   // ---- output ----
-  double cluster_radius_m = 0.5;     // [m] particles this close to the best one form the
-  double cluster_radius_rad = 0.5;   // [rad] ... cluster whose weighted mean is the pose
-  double keyframe_distance = 0.5;    // [m] a relative-pose factor every this much travel ...
-  double keyframe_angle = 0.35;      // [rad] ... or rotation (as the SLAM's keyframes)
+  double cluster_radius_m = 0.5;           // [m] particles this close to the best one form the
+  double cluster_radius_rad = 0.5;         // [rad] ... cluster whose weighted mean is the pose
+  double keyframe_distance = 0.5;          // [m] a relative-pose factor every this much travel ...
+  double keyframe_angle = 0.35;            // [rad] ... or rotation (as the SLAM's keyframes)
   double factor_floor_sigma_xy = 0.02;     // [m] std added to each pose's cluster spread
   double factor_floor_sigma_theta = 0.01;  // [rad] (map and timing errors no spread shows)
   // ---- map and sensor ----
-  double max_range = 30.0;           // [m] longer beams are ignored (as grid.max_range)
-  double field_max_distance = 0.4;   // [m] the likelihood field's reach (as
-                                     //     grid.field_max_distance; at most 15 map cells)
-  int seed = 42;                     // [-] random seed (runs are reproducible)
-  MotionOptions motion;              // the SLAM's motion model (options.hpp)
-  MatcherOptions matcher;            // the SLAM's scan matcher and likelihood field (options.hpp)
+  double max_range = 30.0;          // [m] longer beams are ignored (as grid.max_range)
+  double field_max_distance = 0.4;  // [m] the likelihood field's reach (as
+                                    //     grid.field_max_distance; at most 15 map cells)
+  int seed = 42;                    // [-] random seed (runs are reproducible)
+  MotionOptions motion;             // the SLAM's motion model (options.hpp)
+  MatcherOptions matcher;           // the SLAM's scan matcher and likelihood field (options.hpp)
 
   template <class A>
   void Serialize(A* a) {
@@ -147,39 +147,39 @@ struct LocalizerOptions {
 
 // What the localizer is doing.
 enum class LocalizerState {
-  kWaiting,      // no scan yet
-  kConverging,   // initialised (initial pose or global), not yet confirmed by a good update
-  kLocalized,    // the last update fitted the map
-  kLost,         // lost_updates bad updates in a row, not relocalizing (relocalize: false)
+  kWaiting,     // no scan yet
+  kConverging,  // initialised (initial pose or global), not yet confirmed by a good update
+  kLocalized,   // the last update fitted the map
+  kLost,        // lost_updates bad updates in a row, not relocalizing (relocalize: false)
 };
 const char* LocalizerStateName(LocalizerState state);
 
 // What AddScan did with one scan.
 struct LocalizationResult {
-  bool processed = false;          // the filter ran on this scan
-  fl::Pose2 T_map_base;            // the pose at the scan time, map frame
+  bool processed = false;                                // the filter ran on this scan
+  fl::Pose2 T_map_base;                                  // the pose at the scan time, map frame
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // of the pose's cluster (x, y, θ)
   LocalizerState state = LocalizerState::kWaiting;
-  int particles = 0;               // particle count after this scan
-  double neff = 0.0;               // effective sample size of this update's weights
+  int particles = 0;  // particle count after this scan
+  double neff = 0.0;  // effective sample size of this update's weights
   bool resampled = false;
-  double fit = 0.0;                // mean log-likelihood per beam at the best-fitting particle
-  int bad_updates = 0;             // bad updates in a row so far
-  bool initialized_from_pose = false;  // this scan drew the particles around an initial pose
-  bool global_initialization = false;  // this scan started a global initialisation
-  bool initial_pose_rejected = false;  // this scan rejected the initial pose (it did not fit)
-  bool lost = false;                   // this scan found the filter lost (it had fitted before)
-  bool odometry_jump = false;          // the odometry step was flagged as a jump, not trusted
-  std::vector<KeyframeFactor> factors; // relative-pose factors completed at this scan
+  double fit = 0.0;                     // mean log-likelihood per beam at the best-fitting particle
+  int bad_updates = 0;                  // bad updates in a row so far
+  bool initialized_from_pose = false;   // this scan drew the particles around an initial pose
+  bool global_initialization = false;   // this scan started a global initialisation
+  bool initial_pose_rejected = false;   // this scan rejected the initial pose (it did not fit)
+  bool lost = false;                    // this scan found the filter lost (it had fitted before)
+  bool odometry_jump = false;           // the odometry step was flagged as a jump, not trusted
+  std::vector<KeyframeFactor> factors;  // relative-pose factors completed at this scan
   int valid_beams = 0;
 };
 
 struct LocalizerStats {
-  int64_t scans = 0;                    // accepted scans
-  int64_t processed = 0;                // filter updates
-  int64_t dropped_time_backwards = 0;   // scans whose time did not increase
-  int64_t rejected_bad_scan = 0;        // beam count / geometry changed, non-finite odometry
-  int64_t invalid_beams = 0;            // NaN / inf / zero / over-range beams ignored
+  int64_t scans = 0;                   // accepted scans
+  int64_t processed = 0;               // filter updates
+  int64_t dropped_time_backwards = 0;  // scans whose time did not increase
+  int64_t rejected_bad_scan = 0;       // beam count / geometry changed, non-finite odometry
+  int64_t invalid_beams = 0;           // NaN / inf / zero / over-range beams ignored
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates whose match fell back to the sample
@@ -189,7 +189,7 @@ struct LocalizerStats {
   int64_t lost_detections = 0;          // lost after having fitted (kidnapped robot)
   int64_t global_initializations = 0;
   int64_t factors = 0;
-  int max_particles_used = 0;           // largest particle count so far
+  int max_particles_used = 0;  // largest particle count so far
 };
 
 class MonteCarloLocalizer {
@@ -209,8 +209,7 @@ class MonteCarloLocalizer {
   // (and changes nothing) for a scan whose time does not increase, whose beam count or geometry
   // differs from the first scan, or with a non-finite odometry pose. The first scan
   // initialises the filter (around the initial pose if one was set, else globally).
-  fl::Status AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
-                     LocalizationResult* result);
+  fl::Status AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, LocalizationResult* result);
 
   // ---- the stages (public so that each can be tested) ----
   // Draws min_particles particles around `T_map_base` (initial_sigma_*).
@@ -286,13 +285,13 @@ class MonteCarloLocalizer {
   fl::Pose2 odom_;               // odometry with flagged jumps removed
   fl::Pose2 odom_at_processed_;  // `odom_` at the last filter update
   bool pending_jump_ = false;
-  fl::Pose2 estimate_;           // cluster mean at the last update (grid frame)
+  fl::Pose2 estimate_;  // cluster mean at the last update (grid frame)
 
   // Keyframes of the published factors.
   bool have_keyframe_ = false;
   int keyframe_id_ = -1;
   fl::Utime keyframe_utime_ = 0;
-  fl::Pose2 keyframe_pose_;               // map frame
+  fl::Pose2 keyframe_pose_;  // map frame
   Eigen::Matrix3d keyframe_cov_ = Eigen::Matrix3d::Zero();
 
   std::vector<Eigen::Vector2d> hits_base_, match_base_;

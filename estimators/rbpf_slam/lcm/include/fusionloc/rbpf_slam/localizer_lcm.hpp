@@ -70,8 +70,8 @@ class LocalizerNode : public LcmNode {
 
   RbpfSlamNodeOptions node_options_;
   LcmInterface* lcm_;
-  std::string ch_laser_, ch_odometry_, ch_laser_to_base_, ch_initial_pose_, ch_pose_,
-      ch_factors_, ch_map_;
+  std::string ch_laser_, ch_odometry_, ch_laser_to_base_, ch_initial_pose_, ch_pose_, ch_factors_,
+      ch_map_;
   std::string map_name_;
   OccupancyMap map_;
   MonteCarloLocalizer localizer_;
@@ -88,9 +88,9 @@ class LocalizerNode : public LcmNode {
   };
   std::vector<HeldScan> held_;  // first scans waiting for LASER_TO_BASE
   Utime last_utime_ = 0, last_map_utime_ = 0;
-  std::string last_event_;      // the last rejection / loss, kept in the status message
+  std::string last_event_;  // the last rejection / loss, kept in the status message
   bool have_initial_pose_ = false;
-  Pose2 initial_pose_;          // the last INITIAL_POSE accepted (for the messages)
+  Pose2 initial_pose_;  // the last INITIAL_POSE accepted (for the messages)
 };
 
 }  // namespace fl::rbpf
