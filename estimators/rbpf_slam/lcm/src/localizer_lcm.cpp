@@ -312,7 +312,6 @@ void LocalizerNode::UpdateStatus(const LocalizationResult& r) {
   status_.Set("factors", static_cast<double>(s.factors));
   status_.Set("sigma_xy", std::sqrt(std::max(0.0, r.covariance(0, 0) + r.covariance(1, 1))));
   status_.Set("sigma_theta", std::sqrt(std::max(0.0, r.covariance(2, 2))));
-  const std::string state = LocalizerStateName(r.state);
   switch (r.state) {
     case LocalizerState::kLocalized:
       status_.SetState(
@@ -334,7 +333,7 @@ void LocalizerNode::UpdateStatus(const LocalizationResult& r) {
                        last_event_.empty() ? std::string("lost") : last_event_);
       break;
     case LocalizerState::kWaiting:
-      status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting: " + state);
+      status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for a scan to run on");
       break;
   }
 }
