@@ -505,6 +505,40 @@ TEST(Localizer, AWrongInitialPoseIsRejectedNotFollowed) {
   }
 }
 
+// People around the robot (obstacles the map does not have) spoil the fit for a while: the
+// search of the whole map finds no place that fits better, and the filter stays where it is
+// (no jump to a look-alike place, not reported lost).
+TEST(Localizer, PoorFitsWithNoBetterPlaceOnTheMapKeepTheFilterWhereItIs) {
+  test::LaserWorld crowded = test::LaserWorld::RoomWithBoxes();
+  for (double x = 0.0; x <= 3.0; x += 1.0) {  // people along 3 m of the first corridor
+    crowded.AddBox(x, -5.4, x + 0.4, -5.0);
+    crowded.AddBox(x + 0.5, -4.0, x + 0.9, -3.6);
+  }
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  lo.seed = 17;
+  const test::LoopRun run = test::MakeLoopRun(crowded, lo);
+  MonteCarloLocalizer loc(TestOptions(), ExactRoom());
+  ASSERT_TRUE(loc.SetInitialPose(run.truth[0]).ok());
+  const Output out = Localize(&loc, run, lo, run.odom);
+  double worst = 0.0;
+  for (size_t k = 0; k < out.poses.size(); ++k) {
+    worst = std::max(worst, Distance(out.poses[k], out.truth[k]));
+  }
+  const auto& st = loc.stats();
+  const auto fits = FitRange(out, 0, out.results.size());
+  std::printf(
+      "crowd: fits %.2f .. %.2f, bad updates %lld, searches that found no better place "
+      "%lld, lost %lld, worst error %.3f m\n",
+      fits.first, fits.second, static_cast<long long>(st.bad_updates),
+      static_cast<long long>(st.relocalizations_refused),
+      static_cast<long long>(st.lost_detections), worst);
+  EXPECT_GE(st.relocalizations_refused, 1);
+  EXPECT_EQ(st.lost_detections, 0);
+  EXPECT_EQ(st.global_initializations, 0);
+  EXPECT_LT(worst, 0.1);
+}
+
 // ---- the process: fl-rbpf-slam --localize MAP.yaml over a log ----
 
 struct ProcessRun {
@@ -708,19 +742,28 @@ TEST(Localizer, ANoisyLaserWithTheFieldAtItsNoiseTracksAndRejectsAWrongInitialPo
         loc.SetInitialPose(fl::Pose2(run.truth[0].x + 3.0, run.truth[0].y, run.truth[0].theta))
             .ok());
     const Output out = Localize(&loc, run, lo, run.odom);
-    size_t rejected = out.poses.size();
+    // Reported at the first search (poor fit; with the default relocalize_min_gain, 0.5, the
+    // true place did not fit better by that much yet), rejected at a later one.
+    size_t rejected = out.poses.size(), reported = out.poses.size();
     for (size_t k = 0; k < out.poses.size() && rejected == out.poses.size(); ++k) {
       if (out.results[k].initial_pose_rejected) rejected = k;
+      if ((out.results[k].initial_pose_rejected || out.results[k].relocalization_refused) &&
+          reported == out.poses.size()) {
+        reported = k;
+      }
       EXPECT_TRUE(out.results[k].factors.empty()) << k;
+      EXPECT_NE(out.results[k].state, LocalizerState::kLocalized) << k;
     }
     ASSERT_LT(rejected, out.poses.size());
     const double seconds = 1e-6 * static_cast<double>(out.utimes[rejected] - out.utimes[0]);
+    const double reported_s = 1e-6 * static_cast<double>(out.utimes[reported] - out.utimes[0]);
     const auto fits = FitRange(out, 0, rejected + 1);
     std::printf(
-        "10 cm laser, sigma 0.1, wrong initial pose: fit %.2f .. %.2f, rejected after "
-        "%.1f s of data\n",
-        fits.first, fits.second, seconds);
-    EXPECT_LE(seconds, 3.0);
+        "10 cm laser, sigma 0.1, wrong initial pose: fit %.2f .. %.2f, poor fit reported after "
+        "%.1f s, rejected after %.1f s of data\n",
+        fits.first, fits.second, reported_s, seconds);
+    EXPECT_LE(reported_s, 3.0);
+    EXPECT_LE(seconds, 10.0);
     for (size_t k = out.poses.size() / 2; k < out.poses.size(); ++k) {
       ASSERT_LT(Distance(out.poses[k], out.truth[k]), 0.15) << k;
     }

@@ -95,6 +95,10 @@ Status LocalizerOptions::Validate() const {
                          " must be a negative number (a mean log-likelihood per beam, e.g. -1.6)");
   }
   if (lost_updates < 1) return Status::Error("lost_updates must be >= 1");
+  if (!(relocalize_min_gain >= 0.0) || !std::isfinite(relocalize_min_gain)) {
+    return Status::Error("relocalize_min_gain = " + FormatDouble(relocalize_min_gain) +
+                         " must be >= 0 (a mean log-likelihood per beam, e.g. 0.2)");
+  }
   FL_LOC_RETURN_IF_ERROR(Positive("cluster_radius_m", cluster_radius_m));
   FL_LOC_RETURN_IF_ERROR(Positive("cluster_radius_rad", cluster_radius_rad));
   FL_LOC_RETURN_IF_ERROR(Positive("keyframe_distance", keyframe_distance));
@@ -269,14 +273,16 @@ void MonteCarloLocalizer::InitializeAround(const fl::Pose2& T_map_base) {
   ++stats_.initial_poses;
 }
 
-void MonteCarloLocalizer::InitializeGlobal(const std::vector<Eigen::Vector2d>& points) {
+double MonteCarloLocalizer::InitializeGlobal(const std::vector<Eigen::Vector2d>& points) {
   ++stats_.global_initializations;
   state_ = LocalizerState::kConverging;
   from_initial_pose_ = false;
   fitted_since_init_ = false;
   bad_in_a_row_ = 0;
   have_keyframe_ = false;
-  if (points.empty() || free_cells_.empty()) return;  // nothing to score with: keep the particles
+  if (points.empty() || free_cells_.empty()) {  // nothing to score with: keep the particles
+    return -std::numeric_limits<double>::infinity();
+  }
   // The scoring beams, evenly spread over the scan.
   std::vector<Eigen::Vector2d> sub;
   const size_t n = std::min(points.size(), static_cast<size_t>(opt_.global_beams));
@@ -303,15 +309,18 @@ void MonteCarloLocalizer::InitializeGlobal(const std::vector<Eigen::Vector2d>& p
     }
   }
   particles_.clear();
+  double best_ll = -std::numeric_limits<double>::infinity();
   while (!best.empty()) {
     const MatchResult mr = MatchScan(grid_, points, best.top().second, opt_.matcher);
     best.pop();
     particles_.push_back({mr.T_world_base, mr.log_likelihood / opt_.matcher.likelihood_gain});
+    best_ll = std::max(best_ll, mr.log_likelihood);
   }
   double mx = -std::numeric_limits<double>::infinity();
   for (const auto& p : particles_) mx = std::max(mx, p.log_w);
   for (auto& p : particles_) p.log_w -= mx;
   estimate_ = particles_[BestIndex()].pose;
+  return best_ll / static_cast<double>(points.size());
 }
 
 void MonteCarloLocalizer::Predict(const fl::Pose2& delta, bool jump) {
@@ -515,12 +524,8 @@ Status MonteCarloLocalizer::AddScan(const LaserScan& scan, const fl::Pose2& odom
     res->initialized_from_pose = true;
     fit = Correct(match_base_);
   } else if (particles_.empty()) {
-    InitializeGlobal(match_base_);
+    fit = InitializeGlobal(match_base_);
     res->global_initialization = true;
-    fit = particles_.empty()
-              ? -std::numeric_limits<double>::infinity()
-              : ScanLogLikelihood(grid_, match_base_, particles_[BestIndex()].pose, opt_.matcher) /
-                    static_cast<double>(std::max<size_t>(1, match_base_.size()));
   } else {
     Predict(delta, pending_jump_);
     fit = Correct(match_base_);
@@ -540,17 +545,42 @@ Status MonteCarloLocalizer::AddScan(const LaserScan& scan, const fl::Pose2& odom
     ++bad_in_a_row_;
     ++stats_.bad_updates;
     if (bad_in_a_row_ >= opt_.lost_updates) {
-      if (from_initial_pose_ && !fitted_since_init_) {
+      // With relocalize, the verdict needs a better place: the whole map is searched, and the
+      // filter moves there only if the scan fits there by relocalize_min_gain per beam better
+      // than where it is (a map that is wrong here, or people around the robot, make poor fits
+      // too, and a search of a map with look-alike places would then jump to one of them).
+      const bool was_from_initial_pose = from_initial_pose_, had_fitted = fitted_since_init_;
+      bool moved = !opt_.relocalize;
+      if (opt_.relocalize) {
+        const std::vector<Particle> kept = particles_;
+        const fl::Pose2 kept_estimate = estimate_;
+        const LocalizerState kept_state = state_;
+        const bool kept_keyframe = have_keyframe_;
+        res->search_fit = InitializeGlobal(match_base_);
+        moved = res->search_fit >= fit + opt_.relocalize_min_gain;
+        if (moved) {
+          res->global_initialization = true;
+        } else {
+          --stats_.global_initializations;
+          ++stats_.relocalizations_refused;
+          res->relocalization_refused = true;
+          particles_ = kept;
+          estimate_ = kept_estimate;
+          state_ = kept_state;
+          from_initial_pose_ = was_from_initial_pose;
+          fitted_since_init_ = had_fitted;
+          have_keyframe_ = kept_keyframe;
+          bad_in_a_row_ = 0;  // searched again after lost_updates more bad updates
+        }
+      }
+      if (moved && was_from_initial_pose && !had_fitted) {
         res->initial_pose_rejected = true;
         ++stats_.initial_pose_rejections;
-      } else if (fitted_since_init_) {
+      } else if (moved && had_fitted) {
         res->lost = true;
         ++stats_.lost_detections;
       }
-      if (opt_.relocalize) {
-        InitializeGlobal(match_base_);
-        res->global_initialization = true;
-      } else {
+      if (!opt_.relocalize) {
         state_ = LocalizerState::kLost;
         bad_in_a_row_ = 0;
         from_initial_pose_ = false;

@@ -297,6 +297,11 @@ void LocalizerNode::UpdateStatus(const LocalizationResult& r) {
   } else if (r.lost) {
     last_event_ = "lost at utime " + std::to_string(last_utime_) + " (kidnapped?): " + why + next;
     FL_LOG(WARN) << last_event_;
+  } else if (r.relocalization_refused) {
+    last_event_ = "poor fit at utime " + std::to_string(last_utime_) + ": " + why +
+                  ", but no place on the map fits better (best " +
+                  FormatDouble(std::round(r.search_fit * 100) / 100) + "): staying";
+    FL_LOG(WARN) << last_event_;
   } else if (r.initialized_from_pose) {
     last_event_.clear();
   }
@@ -309,6 +314,7 @@ void LocalizerNode::UpdateStatus(const LocalizationResult& r) {
   status_.Set("initial_pose_rejections", static_cast<double>(s.initial_pose_rejections));
   status_.Set("lost_detections", static_cast<double>(s.lost_detections));
   status_.Set("global_initializations", static_cast<double>(s.global_initializations));
+  status_.Set("relocalizations_refused", static_cast<double>(s.relocalizations_refused));
   status_.Set("factors", static_cast<double>(s.factors));
   status_.Set("sigma_xy", std::sqrt(std::max(0.0, r.covariance(0, 0) + r.covariance(1, 1))));
   status_.Set("sigma_theta", std::sqrt(std::max(0.0, r.covariance(2, 2))));
@@ -346,14 +352,16 @@ void LocalizerNode::Finish() {
 std::string LocalizerNode::Summary() const {
   const auto& s = localizer_.stats();
   return "localization on " + map_name_ + ": scans " + std::to_string(s.scans) +
-         ", filter updates " + std::to_string(s.processed) + ", final state " +
+         ", filter updates " + std::to_string(s.processed) + " (bad fits " +
+         std::to_string(s.bad_updates) + "), final state " +
          LocalizerStateName(localizer_.state()) + ", particles " +
          std::to_string(localizer_.num_particles()) + " (max " +
          std::to_string(s.max_particles_used) + "), initial poses " +
          std::to_string(s.initial_poses) + " (rejected " +
          std::to_string(s.initial_pose_rejections) + "), lost " +
          std::to_string(s.lost_detections) + ", global initialisations " +
-         std::to_string(s.global_initializations) + ", factors " + std::to_string(s.factors) +
+         std::to_string(s.global_initializations) + " (searches that found no better place " +
+         std::to_string(s.relocalizations_refused) + "), factors " + std::to_string(s.factors) +
          ", dropped (time) " + std::to_string(s.dropped_time_backwards) + ", rejected " +
          std::to_string(s.rejected_bad_scan) + ", odometry jumps " +
          std::to_string(s.odometry_jumps);

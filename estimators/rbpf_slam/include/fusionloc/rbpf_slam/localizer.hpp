@@ -88,12 +88,18 @@ struct LocalizerOptions {
                                       //     with a mean log-likelihood per beam below this is a
                                       //     bad update (0 = every beam on an obstacle; about -3
                                       //     = no beam within the field); see docs/RBPF_SLAM.md
-  int lost_updates = 5;               // [-] this many bad updates in a row: lost (or, before
-                                      //     any good update since an initial pose, that pose
-                                      //     is rejected)
-  bool relocalize = true;             // [-] when lost or the initial pose is rejected, start a
-                                      //     global initialisation (false: keep tracking and
-                                      //     report it only)
+  int lost_updates = 5;               // [-] this many bad updates in a row: the filter is
+                                      //     lost (or, before any good update since an initial
+                                      //     pose, that pose is wrong) ...
+  bool relocalize = true;             // [-] ... then the whole map is searched (a global
+                                      //     initialisation) and the filter moves to the best
+                                      //     place if the scan fits there better (below); only
+                                      //     then is it reported lost / the initial pose
+                                      //     rejected. false: reported at once, no search
+  double relocalize_min_gain = 0.5;   // [-] the searched place must fit the scan by this much
+                                      //     more (mean log-likelihood per beam) than where the
+                                      //     filter is; else the filter stays (a map wrong
+                                      //     there, people around: no better place exists)
   // ---- output ----
   double cluster_radius_m = 0.5;           // [m] particles this close to the best one form the
   double cluster_radius_rad = 0.5;         // [rad] ... cluster whose weighted mean is the pose
@@ -130,6 +136,7 @@ struct LocalizerOptions {
     a->Visit("lost_log_likelihood", &lost_log_likelihood);
     a->Visit("lost_updates", &lost_updates);
     a->Visit("relocalize", &relocalize);
+    a->Visit("relocalize_min_gain", &relocalize_min_gain);
     a->Visit("cluster_radius_m", &cluster_radius_m);
     a->Visit("cluster_radius_rad", &cluster_radius_rad);
     a->Visit("keyframe_distance", &keyframe_distance);
@@ -169,6 +176,9 @@ struct LocalizationResult {
   bool global_initialization = false;   // this scan started a global initialisation
   bool initial_pose_rejected = false;   // this scan rejected the initial pose (it did not fit)
   bool lost = false;                    // this scan found the filter lost (it had fitted before)
+  bool relocalization_refused = false;  // lost_updates bad fits, but the search of the whole map
+                                        // found no place that fits better: the filter stayed
+  double search_fit = 0.0;              // that search's best fit (when one ran on this scan)
   bool odometry_jump = false;           // the odometry step was flagged as a jump, not trusted
   std::vector<KeyframeFactor> factors;  // relative-pose factors completed at this scan
   int valid_beams = 0;
@@ -187,7 +197,8 @@ struct LocalizerStats {
   int64_t initial_poses = 0;            // initial poses applied
   int64_t initial_pose_rejections = 0;  // ... found wrong
   int64_t lost_detections = 0;          // lost after having fitted (kidnapped robot)
-  int64_t global_initializations = 0;
+  int64_t global_initializations = 0;   // the particles replaced by a search of the whole map
+  int64_t relocalizations_refused = 0;  // searches after bad fits that found no better place
   int64_t factors = 0;
   int max_particles_used = 0;  // largest particle count so far
 };
@@ -214,8 +225,9 @@ class MonteCarloLocalizer {
   // ---- the stages (public so that each can be tested) ----
   // Draws min_particles particles around `T_map_base` (initial_sigma_*).
   void InitializeAround(const fl::Pose2& T_map_base);
-  // Global initialisation with the points (base frame) of the current scan.
-  void InitializeGlobal(const std::vector<Eigen::Vector2d>& points_base);
+  // Global initialisation with the points (base frame) of the current scan; returns the best
+  // hypothesis' fit (mean log-likelihood per point; -inf if there was nothing to score).
+  double InitializeGlobal(const std::vector<Eigen::Vector2d>& points_base);
   // Every particle samples the odometry step `delta` (jump: the step was not trusted).
   void Predict(const fl::Pose2& delta, bool jump);
   // Scan matching and weighting of every particle; returns the fit (mean log-likelihood per
