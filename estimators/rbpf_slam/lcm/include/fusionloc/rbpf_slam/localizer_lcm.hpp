@@ -11,11 +11,12 @@
 //      information in rows/cols 0, 1, 5), RBPF_MAP (the loaded map as
 //      fusionloc.occupancy_grid_t, at the first scan, every --map-period-s of data time and at
 //      the end), STATUS_FL_RBPF_SLAM:
-//      level OK while localized, WARN while converging, lost, or after an initial pose was
-//      rejected (the message says which and why); keys state (0 waiting, 1 converging,
+//      level OK while localized, WARN while converging (after an initial pose, a global
+//      initialisation, a rejected initial pose or a loss: the message says which and why),
+//      ERROR when lost without relocalizing; keys state (0 waiting, 1 converging,
 //      2 localized, 3 lost), particles, neff, fit, bad_updates, initial_poses,
-//      initial_pose_rejections, lost_detections, global_initializations, factors, and
-//      (with the state) sigma_xy, sigma_theta of the pose's cluster.
+//      initial_pose_rejections, lost_detections, global_initializations,
+//      relocalizations_refused, factors, sigma_xy, sigma_theta (the pose cluster's spread).
 #pragma once
 
 #include <string>
