@@ -1,5 +1,6 @@
 #include "fusionloc/rbpf_slam/localizer_lcm.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -308,7 +309,10 @@ void LocalizerNode::UpdateStatus(const LocalizationResult& r) {
   status_.Set("state", static_cast<double>(r.state));
   status_.Set("particles", r.particles);
   status_.Set("neff", r.neff);
-  if (r.processed) status_.Set("fit", r.fit);
+  if (r.processed) {
+    status_.Set("fit", r.fit);
+    last_fit_ = r.fit;
+  }
   status_.Set("bad_updates", r.bad_updates);
   status_.Set("initial_poses", static_cast<double>(s.initial_poses));
   status_.Set("initial_pose_rejections", static_cast<double>(s.initial_pose_rejections));
@@ -320,10 +324,21 @@ void LocalizerNode::UpdateStatus(const LocalizationResult& r) {
   status_.Set("sigma_theta", std::sqrt(std::max(0.0, r.covariance(2, 2))));
   switch (r.state) {
     case LocalizerState::kLocalized:
-      status_.SetState(
-          fusionloc::status_t::LEVEL_OK,
-          "localized on " + map_name_ +
-              (last_event_.empty() ? std::string() : " (earlier: " + last_event_ + ")"));
+      if (r.bad_updates > 0 || r.relocalization_refused) {
+        // Still where it was, but the scans do not fit the map well there right now.
+        status_.SetState(fusionloc::status_t::LEVEL_WARN,
+                         "localized on " + map_name_ + ", but the last " +
+                             std::to_string(std::max(r.bad_updates, 1)) +
+                             " filter update(s) fit poorly (fit " +
+                             FormatDouble(std::round(last_fit_ * 100) / 100) +
+                             " < lost_log_likelihood " + FormatDouble(o.lost_log_likelihood) + ")" +
+                             (last_event_.empty() ? std::string() : "; " + last_event_));
+      } else {
+        status_.SetState(
+            fusionloc::status_t::LEVEL_OK,
+            "localized on " + map_name_ +
+                (last_event_.empty() ? std::string() : " (earlier: " + last_event_ + ")"));
+      }
       break;
     case LocalizerState::kConverging:
       status_.SetState(fusionloc::status_t::LEVEL_WARN,

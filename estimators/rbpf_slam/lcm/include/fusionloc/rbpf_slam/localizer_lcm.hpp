@@ -11,8 +11,9 @@
 //      information in rows/cols 0, 1, 5), RBPF_MAP (the loaded map as
 //      fusionloc.occupancy_grid_t, at the first scan, every --map-period-s of data time and at
 //      the end), STATUS_FL_RBPF_SLAM:
-//      level OK while localized, WARN while converging (after an initial pose, a global
-//      initialisation, a rejected initial pose or a loss: the message says which and why),
+//      level OK while localized (WARN while its last updates fit poorly), WARN while
+//      converging (after an initial pose, a global initialisation, a rejected initial pose or
+//      a loss: the message says which and why),
 //      ERROR when lost without relocalizing; keys state (0 waiting, 1 converging,
 //      2 localized, 3 lost), particles, neff, fit, bad_updates, initial_poses,
 //      initial_pose_rejections, lost_detections, global_initializations,
@@ -90,6 +91,7 @@ class LocalizerNode : public LcmNode {
   std::vector<HeldScan> held_;  // first scans waiting for LASER_TO_BASE
   Utime last_utime_ = 0, last_map_utime_ = 0;
   std::string last_event_;  // the last rejection / loss, kept in the status message
+  double last_fit_ = 0.0;   // the last filter update's fit
   bool have_initial_pose_ = false;
   Pose2 initial_pose_;  // the last INITIAL_POSE accepted (for the messages)
 };
