@@ -539,6 +539,54 @@ TEST(Localizer, PoorFitsWithNoBetterPlaceOnTheMapKeepTheFilterWhereItIs) {
   EXPECT_LT(worst, 0.1);
 }
 
+// The node drops a bad INITIAL_POSE (not finite, outside the map) with the reason, and applies
+// a good one at the next scan.
+TEST(LocalizerNode, BadInitialPosesAreDroppedAndCountedAGoodOneIsApplied) {
+  auto lcm = MakeLcm("memq://");
+  RbpfSlamNodeOptions node_options;
+  node_options.mounting_wait_s = 0.0;
+  LocalizerNode node(TestOptions(), node_options, ExactRoom(), "room.yaml", lcm.get(),
+                     ChannelMap());
+  test::LoopRunOptions lo;
+  lo.step_m = 0.1;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  bot_core::pose_t bad = PoseToLcm(run.utimes[0], fl::Pose2(std::nan(""), 0.0, 0.0));
+  lcm->Publish("INITIAL_POSE", bad, 0);
+  bad = PoseToLcm(run.utimes[0], fl::Pose2(500.0, 0.0, 0.0));
+  lcm->Publish("INITIAL_POSE", bad, 0);
+  const bot_core::pose_t good = PoseToLcm(run.utimes[0], run.truth[0]);
+  lcm->Publish("INITIAL_POSE", good, 0);
+  int poses = 0;
+  lcm->Subscribe<bot_core::pose_t>("RBPF_POSE",
+                                   [&](const bot_core::pose_t&, const std::string&) { ++poses; });
+  for (size_t k = 0; k < 20; ++k) {
+    fusionloc::wheel_odometry_t o{};
+    o.utime = run.utimes[k];
+    o.x = run.odom[k].x;
+    o.y = run.odom[k].y;
+    o.theta = run.odom[k].theta;
+    lcm->Publish("ODOMETRY", o, o.utime);
+    bot_core::planar_lidar_t sc{};
+    sc.utime = run.utimes[k];
+    sc.ranges = run.ranges[k];
+    sc.nranges = static_cast<int32_t>(sc.ranges.size());
+    sc.rad0 = static_cast<float>(lo.rad0);
+    sc.radstep = static_cast<float>(lo.radstep);
+    lcm->Publish("LASER", sc, sc.utime);
+    while (lcm->HandleSubscriptions(0) > 0) {
+    }
+    node.Poll();
+  }
+  node.Finish();
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  EXPECT_EQ(node.status().dropped(), 2);
+  EXPECT_EQ(node.localizer().stats().initial_poses, 1);
+  EXPECT_EQ(node.localizer().stats().global_initializations, 0);
+  EXPECT_EQ(node.localizer().state(), LocalizerState::kLocalized);
+  EXPECT_EQ(poses, 20);
+}
+
 // ---- the process: fl-rbpf-slam --localize MAP.yaml over a log ----
 
 struct ProcessRun {
