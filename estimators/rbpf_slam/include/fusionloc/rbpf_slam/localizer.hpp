@@ -8,10 +8,13 @@
 //   2. Correct: the sample is refined by scan-to-map matching and weighted by the likelihood
 //      field, log w += log p(z | x, m) / matcher.likelihood_gain (the SLAM's improved proposal);
 //   3. Check: the fit of the scan (mean log-likelihood per beam at the best-fitting particle) is
-//      compared with lost_log_likelihood; lost_updates bad updates in a row mean the filter is
-//      lost (a kidnapped robot) or, if it never fitted since an initial pose, that the initial
-//      pose was wrong: it is rejected and reported, never followed silently. Then (with
-//      relocalize) a global initialisation follows;
+//      compared with lost_log_likelihood; after lost_updates bad updates in a row the whole map
+//      is searched (a global initialisation on this scan), and if the scan fits the best place
+//      found by relocalize_min_gain more than where the filter is, the filter moves there: it
+//      was lost (a kidnapped robot) or, if it never fitted since an initial pose, the initial
+//      pose was wrong; either is reported (LocalizationResult), never followed silently. If no
+//      place fits better (people around the robot, a stretch where the map is wrong) the
+//      filter stays and says so (relocalization_refused). relocalize: false reports at once;
 //   4. Resample (N_eff < neff_threshold · N) with KLD sampling (Fox 2003): particles are drawn
 //      until their count reaches the KLD bound for the number of (x, y, θ) bins they occupy,
 //      within [min_particles, max_particles]; a tight cloud needs few particles, a spread one
