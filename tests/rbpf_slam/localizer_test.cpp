@@ -177,6 +177,28 @@ TEST(Localizer, KldBoundGrowsWithTheOccupiedBins) {
   EXPECT_EQ(MonteCarloLocalizer::KldParticleCount(1000, 0.05, 2.33), 11061);
 }
 
+// The resampling stage draws as many particles as the occupied bins need: a spread cloud gets
+// many, a tight one the minimum.
+TEST(Localizer, KldResamplingAdaptsTheParticleCountToTheCloudsSpread) {
+  LocalizerOptions o = TestOptions();
+  o.initial_sigma_xy = 2.0;
+  o.initial_sigma_theta = 1.0;
+  MonteCarloLocalizer spread(o, ExactRoom());
+  spread.InitializeAround(fl::Pose2(0.0, -4.5, 0.0));
+  EXPECT_EQ(spread.num_particles(), o.min_particles);
+  const int n_spread = spread.ResampleKld();
+  o.initial_sigma_xy = 0.01;
+  o.initial_sigma_theta = 0.01;
+  MonteCarloLocalizer tight(o, ExactRoom());
+  tight.InitializeAround(fl::Pose2(0.1, -4.4, 0.0));  // inside one 0.25 m, 0.17 rad bin
+  const int n_tight = tight.ResampleKld();
+  std::printf("KLD resampling: 30 particles spread over 2 m / 1 rad -> %d, within 1 cm -> %d\n",
+              n_spread, n_tight);
+  EXPECT_GT(n_spread, 300);  // up to 30 bins: the bound for 30 is 496
+  EXPECT_LE(n_spread, o.max_particles);
+  EXPECT_EQ(n_tight, o.min_particles);
+}
+
 TEST(Localizer, OptionsValidateAndTheConfigFileLoads) {
   EXPECT_TRUE(LocalizerOptions().Validate().ok());
   LocalizerOptions o;
