@@ -25,6 +25,9 @@ constexpr const char* kRbpfPose = "RBPF_POSE";              // bot_core.pose_t, 
 constexpr const char* kRbpfFactors = "RBPF_FACTORS";        // fusionloc.relative_pose_factor_t
 constexpr const char* kRbpfMap = "RBPF_MAP";                // fusionloc.occupancy_grid_t
 constexpr const char* kRbpfTrajectory = "RBPF_TRAJECTORY";  // fusionloc.trajectory_t
+// fl-rbpf-slam --localize: the robot's pose in the saved map (T_map_base), from an operator
+// or a planner, e.g. RViz's "2D Pose Estimate" bridged to LCM.
+constexpr const char* kInitialPose = "INITIAL_POSE";        // bot_core.pose_t
 
 // ---- stereo visual odometry ----
 constexpr const char* kVoPose = "VO_POSE";        // bot_core.pose_t

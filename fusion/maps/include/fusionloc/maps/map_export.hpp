@@ -4,6 +4,7 @@
 //  - point clouds to binary PCD (PCL) and a PNG top view coloured by height.
 // All functions validate their input and throw MapExportError with a clear message; files are
 // written atomically (X.partial, then renamed), so a failure never leaves a file that looks whole.
+// The reverse, a PGM + YAML grid back into a message: map_load.hpp (LoadOccupancyGrid).
 #pragma once
 
 #include <Eigen/Core>
