@@ -108,6 +108,18 @@ def main():
     write("g2o", "m3500-edges-only.g2o",
           head_lines(os.path.join(pg, "M3500b.g2o"), 6, lambda l: l.startswith("EDGE")))
 
+    # ---- map_load: [YAML length u16][map_server YAML, "@IMAGE@" = the image][PGM] ----
+    def map_input(yaml, pgm):
+        return struct.pack("<H", len(yaml)) + yaml.encode() + pgm
+    room = bytes(0 if (x in (0, 7) or y in (0, 5)) else (205 if x == 3 else 254)
+                 for y in range(6) for x in range(8))
+    write("map_load", "trinary-p5.bin", map_input(
+        "image: @IMAGE@\nresolution: 0.05\norigin: [-0.2, -0.15, 0.0]\nnegate: 0\n"
+        "occupied_thresh: 0.65\nfree_thresh: 0.196\n", b"P5\n# fusionloc\n8 6\n255\n" + room))
+    write("map_load", "scale-p2.bin", map_input(
+        "image: @IMAGE@\nresolution: 0.1\norigin: [0, 0, 0]\nmode: scale\nnegate: 1\n",
+        ("P2\n4 2\n255\n" + " ".join(str(v) for v in (0, 50, 128, 255, 255, 128, 50, 0)) + "\n").encode()))
+
     # ---- KITTI ----
     raw = os.path.join(data, "stereo", "kitti_raw_2011_09_26_drive_0001")
     odo = os.path.join(data, "lidar_stereo", "kitti_odometry_04_f000-050")
@@ -285,6 +297,13 @@ def main():
               record(2, rigid().encode()) + b"".join(record(1, odom(k).encode()) + record(0, lidar(k).encode())
                                                      for k in range(4)) + record(1, odom(4).encode()))
         write("rbpf_node", "laser-only.bin", b"".join(record(0, lidar(k, 8).encode()) for k in range(3)))
+        # localizer_node: the rbpf_node channels plus INITIAL_POSE (3).
+        write("localizer_node", "initial-pose.bin",
+              record(2, rigid().encode()) + record(3, pose(0).encode()) +
+              b"".join(record(1, odom(k).encode()) + record(0, lidar(k).encode()) for k in range(4)) +
+              record(1, odom(4).encode()))
+        write("localizer_node", "global.bin",
+              b"".join(record(1, odom(k).encode()) + record(0, lidar(k, 8).encode()) for k in range(3)))
         write("stereo_vo_node", "calib-stereo.bin",
               record(1, calib().encode()) + record(2, rigid(0.0).encode()) +
               b"".join(record(0, stereo(k).encode()) for k in range(3)))
