@@ -291,7 +291,7 @@ void RbpfSlamNode::ProcessReady(bool flush) {
       flush,
       [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
         if (!started_ && !have_laser_to_base_ && node_options_.mounting_wait_s > 0.0 &&
-            (held_.empty() || scan.utime - held_.front().scan.utime <
+            (held_.empty() || UtimeDifference(held_.front().scan.utime, scan.utime) <
                                   SecondsToUtime(node_options_.mounting_wait_s))) {
           held_.push_back({scan, odom != nullptr, odom ? *odom : Pose2(), lookup});
           if (held_.size() == 1) {
