@@ -4,6 +4,8 @@
 #include <cmath>
 #include <string>
 
+#include "fusionloc/common/time.hpp"
+
 namespace fl::rbpf {
 
 fl::Status OdometryBuffer::Add(fl::Utime utime, const fl::Pose2& p) {
@@ -35,8 +37,10 @@ fl::Status OdometryBuffer::Lookup(fl::Utime utime, fl::Pose2* out) const {
   }
   const Sample& b = *it;
   const Sample& a = *(it - 1);
-  if (b.utime - a.utime > max_gap_us_) {
-    return Status::Error("odometry gap of " + std::to_string((b.utime - a.utime) / 1000) +
+  // Saturating: samples stamped at the ends of int64 would overflow the difference.
+  const fl::Utime gap = fl::UtimeDifference(a.utime, b.utime);
+  if (gap > max_gap_us_) {
+    return Status::Error("odometry gap of " + std::to_string(gap / 1000) +
                          " ms around utime " + std::to_string(utime));
   }
   const double f = static_cast<double>(utime - a.utime) / static_cast<double>(b.utime - a.utime);
