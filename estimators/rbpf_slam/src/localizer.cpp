@@ -185,7 +185,8 @@ Status MonteCarloLocalizer::SetBaseLaser(const fl::Pose2& T) {
   if (!std::isfinite(T.x) || !std::isfinite(T.y) || !std::isfinite(T.theta)) {
     return Status::Error("T_base_laser is not finite");
   }
-  if (initialized_) return Status::Error("T_base_laser can only be set before the first scan");
+  if (input_.initialized())
+    return Status::Error("T_base_laser can only be set before the first scan");
   T_base_laser_ = T;
   return Status::Ok();
 }
@@ -439,7 +440,7 @@ fl::Pose2 MonteCarloLocalizer::ClusterMean(Eigen::Matrix3d* covariance) const {
 }
 
 fl::Pose2 MonteCarloLocalizer::CurrentPose() const {
-  return ToMap(estimate_) * odom_at_processed_.between(odom_);
+  return ToMap(estimate_) * odom_at_processed_.between(input_.odom());
 }
 
 Status MonteCarloLocalizer::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
@@ -447,65 +448,38 @@ Status MonteCarloLocalizer::AddScan(const LaserScan& scan, const fl::Pose2& odom
   LocalizationResult local;
   LocalizationResult* res = result ? result : &local;
   *res = LocalizationResult();
-  // --- Validate the input before touching any state (as RbpfSlam::AddScan).
-  if (initialized_ && scan.utime <= last_utime_) {
-    ++stats_.dropped_time_backwards;
-    return Status::Error("scan at utime " + std::to_string(scan.utime) +
-                         " does not come after the previous one (" + std::to_string(last_utime_) +
-                         "); dropped");
-  }
-  if (!std::isfinite(odom_pose.x) || !std::isfinite(odom_pose.y) ||
-      !std::isfinite(odom_pose.theta)) {
-    ++stats_.rejected_bad_scan;
-    return Status::Error("odometry pose at utime " + std::to_string(scan.utime) +
-                         " is not finite; scan dropped");
-  }
-  if (scan.ranges.empty() || !std::isfinite(scan.rad0) || !std::isfinite(scan.radstep) ||
-      scan.radstep == 0.0) {
-    ++stats_.rejected_bad_scan;
-    return Status::Error("scan at utime " + std::to_string(scan.utime) +
-                         " has no beams or a non-finite/zero angle step; dropped");
-  }
-  if (initialized_ && (scan.ranges.size() != beam_count_ || std::abs(scan.rad0 - rad0_) > 1e-6 ||
-                       std::abs(scan.radstep - radstep_) > 1e-9)) {
-    ++stats_.rejected_bad_scan;
-    return Status::Error("scan at utime " + std::to_string(scan.utime) + " has " +
-                         std::to_string(scan.ranges.size()) + " beams (rad0 " +
-                         FormatDouble(scan.rad0) + ", step " + FormatDouble(scan.radstep) +
-                         ") but the first scan had " + std::to_string(beam_count_) +
-                         "; a laser cannot change its geometry: check the LASER channel");
+  // --- Validate the input before touching any state; the odometry step (ScanInput).
+  ScanInput::Step in;
+  Status error;
+  switch (input_.Accept(scan, odom_pose, opt_.motion, &in, &error)) {
+    case ScanInput::Verdict::kTimeBackwards:
+      ++stats_.dropped_time_backwards;
+      return error;
+    case ScanInput::Verdict::kBadInput:
+      ++stats_.rejected_bad_scan;
+      return error;
+    case ScanInput::Verdict::kAccepted:
+      break;
   }
   ++stats_.scans;
   ConvertScan(scan, res);
 
   bool run = false;
   fl::Pose2 delta;
-  if (!initialized_) {
-    initialized_ = true;
-    beam_count_ = scan.ranges.size();
-    rad0_ = scan.rad0;
-    radstep_ = scan.radstep;
-    last_odom_raw_ = odom_pose;
-    odom_ = odom_pose;
-    odom_at_processed_ = odom_;
+  if (in.first) {
+    odom_at_processed_ = odom_pose;
     run = true;
   } else {
-    const fl::Pose2 step = last_odom_raw_.between(odom_pose);
-    last_odom_raw_ = odom_pose;
-    if (std::hypot(step.x, step.y) > opt_.motion.max_odometry_jump_m ||
-        std::abs(step.theta) > opt_.motion.max_odometry_jump_rad) {
+    if (in.odometry_jump) {
       ++stats_.odometry_jumps;
       pending_jump_ = true;
       res->odometry_jump = true;
-    } else {
-      odom_ = odom_ * step;
     }
-    delta = odom_at_processed_.between(odom_);
+    delta = odom_at_processed_.between(input_.odom());
     run = std::hypot(delta.x, delta.y) >= opt_.linear_update ||
           std::abs(delta.theta) >= opt_.angular_update || pending_jump_ ||
           pending_initial_pose_.has_value();
   }
-  last_utime_ = scan.utime;
   if (!run) {
     res->T_map_base = CurrentPose();
     res->state = state_;
@@ -531,7 +505,7 @@ Status MonteCarloLocalizer::AddScan(const LaserScan& scan, const fl::Pose2& odom
     fit = Correct(match_base_);
   }
   pending_jump_ = false;
-  odom_at_processed_ = odom_;
+  odom_at_processed_ = input_.odom();
   res->fit = fit;
 
   // --- Does the scan fit the map?

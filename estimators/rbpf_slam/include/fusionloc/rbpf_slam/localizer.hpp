@@ -45,6 +45,7 @@
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/rbpf_slam/options.hpp"
+#include "fusionloc/rbpf_slam/scan_input.hpp"
 #include "fusionloc/rbpf_slam/tiled_grid.hpp"
 #include "fusionloc/rbpf_slam/types.hpp"
 
@@ -292,13 +293,8 @@ class MonteCarloLocalizer {
   bool fitted_since_init_ = false;  // a good update since the last initialisation
   int bad_in_a_row_ = 0;
 
-  bool initialized_ = false;
-  fl::Utime last_utime_ = 0;
-  size_t beam_count_ = 0;
-  double rad0_ = 0.0, radstep_ = 0.0;
-  fl::Pose2 last_odom_raw_;
-  fl::Pose2 odom_;               // odometry with flagged jumps removed
-  fl::Pose2 odom_at_processed_;  // `odom_` at the last filter update
+  ScanInput input_;              // validation, stamps, odometry with jumps removed
+  fl::Pose2 odom_at_processed_;  // input_.odom() at the last filter update
   bool pending_jump_ = false;
   fl::Pose2 estimate_;  // cluster mean at the last update (grid frame)
 
