@@ -113,6 +113,45 @@ TEST(ScanOdometrySync, ReorderedOdometryWithinTheMergeLatencyIsPlacedByItsStamp)
   EXPECT_NEAR(h[0].odom.x, 1.5, 1e-9);  // between the samples at 0.1 s and 0.2 s
 }
 
+TEST(MountingWait, HoldsTheFirstScansForTheWaitThenHandsThemOnInOrder) {
+  MountingWait wait(1.0);
+  std::vector<Utime> run;
+  const auto on_scan = [&](const LaserScan& s, const Pose2* o, const Status&) {
+    run.push_back(s.utime);
+    EXPECT_NE(o, nullptr);
+  };
+  const Pose2 odom(1, 0, 0);
+  EXPECT_EQ(wait.Offer(true, Scan(1'000'000), &odom, Status::Ok(), on_scan),
+            MountingWait::Outcome::kHeldFirst);
+  EXPECT_EQ(wait.Offer(true, Scan(1'500'000), &odom, Status::Ok(), on_scan),
+            MountingWait::Outcome::kHeld);
+  EXPECT_TRUE(run.empty());
+  EXPECT_EQ(wait.held(), 2u);
+  // 1 s after the first held scan: the wait is over, everything runs in order.
+  EXPECT_EQ(wait.Offer(true, Scan(2'000'000), &odom, Status::Ok(), on_scan),
+            MountingWait::Outcome::kRun);
+  EXPECT_EQ(run, (std::vector<Utime>{1'000'000, 1'500'000, 2'000'000}));
+  EXPECT_EQ(wait.held(), 0u);
+}
+
+TEST(MountingWait, ReleaseRunsTheHeldScansAndNotWaitingOrNoWaitNeverHolds) {
+  std::vector<Utime> run;
+  const auto on_scan = [&](const LaserScan& s, const Pose2*, const Status&) {
+    run.push_back(s.utime);
+  };
+  MountingWait wait(2.0);
+  EXPECT_EQ(wait.Offer(true, Scan(10), nullptr, Status::Error("no odometry"), on_scan),
+            MountingWait::Outcome::kHeldFirst);
+  wait.Release(on_scan);  // the mounting arrived
+  EXPECT_EQ(run, (std::vector<Utime>{10}));
+  EXPECT_EQ(wait.Offer(false, Scan(20), nullptr, Status::Ok(), on_scan),
+            MountingWait::Outcome::kRun);
+  MountingWait none(0.0);
+  EXPECT_EQ(none.Offer(true, Scan(30), nullptr, Status::Ok(), on_scan),
+            MountingWait::Outcome::kRun);
+  EXPECT_EQ(run, (std::vector<Utime>{10, 20, 30}));
+}
+
 TEST(RbpfSlamLcm, FactorAndGridConversions) {
   KeyframeFactor f;
   f.keyframe_i = 3;
@@ -138,17 +177,24 @@ TEST(RbpfSlamLcm, FactorAndGridConversions) {
 
 // A live RbpfSlamNode (memq://) fed `steps` scans at 10 Hz of a robot driving along a room's
 // wall, with LASER_TO_BASE published after `mounting_after` scans (-1: never). Returns the
-// number of RBPF_POSE after each scan and, through `log`, what the node logged.
-std::vector<int> RunNode(int steps, int mounting_after, std::string* log) {
+// number of RBPF_POSE after each scan and, through `log`, what the node logged; through
+// `trajectory_sizes` the size of each RBPF_TRAJECTORY.
+std::vector<int> RunNode(int steps, int mounting_after, std::string* log,
+                         const RbpfSlamNodeOptions& node_options = RbpfSlamNodeOptions(),
+                         std::vector<int>* trajectory_sizes = nullptr) {
   const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
   auto lcm = MakeLcm("memq://");
   int poses = 0;
   lcm->Subscribe<bot_core::pose_t>(channels::kRbpfPose,
                                    [&](const bot_core::pose_t&, const std::string&) { ++poses; });
+  std::vector<int> sizes;
+  lcm->Subscribe<fusionloc::trajectory_t>(
+      channels::kRbpfTrajectory,
+      [&](const fusionloc::trajectory_t& m, const std::string&) { sizes.push_back(m.num_poses); });
   testing::internal::CaptureStderr();
   std::vector<int> out;
   {
-    RbpfSlamNode node(RbpfSlamOptions(), RbpfSlamNodeOptions(), lcm.get(), ChannelMap());
+    RbpfSlamNode node(RbpfSlamOptions(), node_options, lcm.get(), ChannelMap());
     const Pose2 T_base_laser(0.15, 0.0, 0.0);
     for (int k = 0; k < steps; ++k) {
       if (k == mounting_after) {
@@ -184,7 +230,26 @@ std::vector<int> RunNode(int steps, int mounting_after, std::string* log) {
     out.push_back(poses);
   }
   *log = testing::internal::GetCapturedStderr();
+  if (trajectory_sizes) *trajectory_sizes = sizes;
   return out;
+}
+
+TEST(RbpfSlamNode, EveryScansPoseIsPublishedAtTheEndOnlyWhenAsked) {
+  std::string log;
+  // Default (a robot running for hours): the scan path is not kept; RBPF_TRAJECTORY holds the
+  // keyframes, at the end too.
+  std::vector<int> sizes;
+  RunNode(40, 0, &log, RbpfSlamNodeOptions(), &sizes);
+  ASSERT_FALSE(sizes.empty()) << log;
+  EXPECT_LT(sizes.back(), 40) << log;
+  EXPECT_GE(sizes.back(), 2) << log;
+  // --scan-trajectory (a log replay to score): the final RBPF_TRAJECTORY has every scan.
+  RbpfSlamNodeOptions every_scan;
+  every_scan.scan_trajectory = true;
+  RunNode(40, 0, &log, every_scan, &sizes);
+  ASSERT_FALSE(sizes.empty()) << log;
+  EXPECT_EQ(sizes.back(), 40) << log;
+  for (size_t i = 0; i + 1 < sizes.size(); ++i) EXPECT_LT(sizes[i], 40) << log;  // keyframes
 }
 
 TEST(RbpfSlamNode, TheFirstScansWaitForTheMountingAndNoneIsLost) {

@@ -50,7 +50,7 @@ fl::Status RbpfSlam::SetBaseLaser(const fl::Pose2& T_base_laser) {
       !std::isfinite(T_base_laser.theta)) {
     return Status::Error("T_base_laser is not finite");
   }
-  if (initialized_) {
+  if (input_.initialized()) {
     return Status::Error("T_base_laser can only be set before the first scan");
   }
   T_base_laser_ = T_base_laser;
@@ -98,7 +98,7 @@ int RbpfSlam::BestIndex() const {
 }
 
 fl::Pose2 RbpfSlam::CurrentPose() const {
-  return particles_[best_].pose * odom_at_processed_.between(odom_);
+  return particles_[best_].pose * odom_at_processed_.between(input_.odom());
 }
 
 const TiledGrid& RbpfSlam::BestMap() const { return particles_[best_].map; }
@@ -143,47 +143,24 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
     res->factors = factors;
     res->graph_changed = graph_changed;
   }
-  // --- Validate the input before touching any state.
-  if (initialized_ && scan.utime <= last_utime_) {
-    ++stats_.dropped_time_backwards;
-    return Status::Error("scan at utime " + std::to_string(scan.utime) +
-                         " does not come after the previous one (" + std::to_string(last_utime_) +
-                         "); dropped");
-  }
-  if (!std::isfinite(odom_pose.x) || !std::isfinite(odom_pose.y) ||
-      !std::isfinite(odom_pose.theta)) {
-    ++stats_.rejected_bad_scan;
-    return Status::Error("odometry pose at utime " + std::to_string(scan.utime) +
-                         " is not finite; scan dropped");
-  }
-  if (scan.ranges.empty() || !std::isfinite(scan.rad0) || !std::isfinite(scan.radstep) ||
-      scan.radstep == 0.0) {
-    ++stats_.rejected_bad_scan;
-    return Status::Error("scan at utime " + std::to_string(scan.utime) +
-                         " has no beams or a non-finite/zero angle step; dropped");
-  }
-  if (initialized_ && (scan.ranges.size() != beam_count_ || std::abs(scan.rad0 - rad0_) > 1e-6 ||
-                       std::abs(scan.radstep - radstep_) > 1e-9)) {
-    ++stats_.rejected_bad_scan;
-    return Status::Error("scan at utime " + std::to_string(scan.utime) + " has " +
-                         std::to_string(scan.ranges.size()) + " beams (rad0 " +
-                         std::to_string(scan.rad0) + ", step " + std::to_string(scan.radstep) +
-                         ") but the first scan had " + std::to_string(beam_count_) + " (rad0 " +
-                         std::to_string(rad0_) + ", step " + std::to_string(radstep_) +
-                         "); a laser cannot change its geometry: check the LASER channel");
+  // --- Validate the input before touching any state; the odometry step (ScanInput).
+  ScanInput::Step in;
+  Status error;
+  switch (input_.Accept(scan, odom_pose, opt_.motion, &in, &error)) {
+    case ScanInput::Verdict::kTimeBackwards:
+      ++stats_.dropped_time_backwards;
+      return error;
+    case ScanInput::Verdict::kBadInput:
+      ++stats_.rejected_bad_scan;
+      return error;
+    case ScanInput::Verdict::kAccepted:
+      break;
   }
   ++stats_.scans;
   ConvertScan(scan, res);
 
-  if (!initialized_) {
-    initialized_ = true;
-    beam_count_ = scan.ranges.size();
-    rad0_ = scan.rad0;
-    radstep_ = scan.radstep;
-    last_utime_ = scan.utime;
-    last_odom_raw_ = odom_pose;
-    odom_ = odom_pose;
-    odom_at_processed_ = odom_;
+  if (in.first) {
+    odom_at_processed_ = odom_pose;
     for (auto& p : particles_) p.pose = odom_pose;
     Integrate(&particles_[0]);
     for (size_t i = 1; i < particles_.size(); ++i) particles_[i].map = particles_[0].map;
@@ -192,24 +169,19 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
     res->T_world_base = odom_pose;
     res->neff = static_cast<double>(particles_.size());
     MaybeAddKeyframe(scan.utime, res);
-    path_.push_back({scan.utime, 0, fl::Pose2(), odom_, true});
+    RecordScan({scan.utime, 0, fl::Pose2(), odom_pose, true});
     return Status::Ok();
   }
 
-  const double dt_s = 1e-6 * static_cast<double>(scan.utime - last_utime_);
-  last_utime_ = scan.utime;
-  // --- Odometry step since the previous scan; a jump is replaced by "no motion" plus noise.
-  const fl::Pose2 step = last_odom_raw_.between(odom_pose);
-  last_odom_raw_ = odom_pose;
-  if (std::hypot(step.x, step.y) > opt_.motion.max_odometry_jump_m ||
-      std::abs(step.theta) > opt_.motion.max_odometry_jump_rad) {
+  // A jump in the odometry is replaced by "no motion" plus noise.
+  const double dt_s = in.dt_s;
+  const fl::Pose2& step = in.odometry_step;
+  if (in.odometry_jump) {
     ++stats_.odometry_jumps;
     pending_jump_ = true;
     res->odometry_jump = true;
-  } else {
-    odom_ = odom_ * step;
   }
-  const fl::Pose2 delta = odom_at_processed_.between(odom_);
+  const fl::Pose2 delta = odom_at_processed_.between(input_.odom());
   const bool moved = std::hypot(delta.x, delta.y) >= opt_.linear_update ||
                      std::abs(delta.theta) >= opt_.angular_update;
   // A scan taken in a fast turn of a dense scan stream waits for the next one (the motion
@@ -220,7 +192,7 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
   if ((moved || pending_jump_) && !fast_turn) {
     ProcessFilter(delta, pending_jump_, res);
     pending_jump_ = false;
-    odom_at_processed_ = odom_;
+    odom_at_processed_ = input_.odom();
     path_length_ += std::hypot(delta.x, delta.y);
     keyframe_pending_ = true;
     pending_utime_ = scan.utime;
@@ -234,7 +206,7 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
   }
   res->T_world_base = CurrentPose();
   const int kf = anchor_.keyframe;
-  path_.push_back({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), odom_, false});
+  RecordScan({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), false});
   return Status::Ok();
 }
 
@@ -245,7 +217,7 @@ void RbpfSlam::FinishScan(ScanResult* res) {
   MaybeAddKeyframe(pending_utime_, res);
   res->T_world_base = CurrentPose();
   const int kf = anchor_.keyframe;
-  path_.push_back({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base), odom_, true});
+  RecordScan({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), true});
 }
 
 void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res) {
@@ -358,7 +330,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   }
   if (place_full) {
     // Anchored to the nearest keyframe as the filter has it: no node, no factor, no correction.
-    anchor_ = Anchor{revisit.nearest, graph_.pose(revisit.nearest).between(pose), odom_,
+    anchor_ = Anchor{revisit.nearest, graph_.pose(revisit.nearest).between(pose), input_.odom(),
                      stats_.odometry_jumps, true};
     ++stats_.keyframes_bounded;
     return;
@@ -369,14 +341,14 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   kf.normals_base =
       ComputeNormals(kf.points_base, opt_.icp.normal_radius, opt_.icp.normal_max_eigen_ratio);
   kf.path_length = path_length_;
-  kf.odom = odom_;
+  kf.odom = input_.odom();
   kf.odometry_jumps = stats_.odometry_jumps;
   keyframes_.push_back(std::move(kf));
   const int j = graph_.AddNode(pose);
   ++stats_.keyframes;
   res->new_keyframe = true;
   const Anchor from = anchor_;
-  anchor_ = Anchor{j, fl::Pose2(), odom_, stats_.odometry_jumps, false};
+  anchor_ = Anchor{j, fl::Pose2(), input_.odom(), stats_.odometry_jumps, false};
   if (j == 0) return;
   const int i = from.keyframe;
   const fl::Pose2 prior = graph_.pose(i).between(pose);
@@ -502,7 +474,7 @@ bool RbpfSlam::ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, Scan
     ++stats_.reuse_corrections;
     T_c_anchor = icp.T_ref_query;
   }
-  anchor_ = Anchor{c, T_c_anchor, odom_, stats_.odometry_jumps, true};
+  anchor_ = Anchor{c, T_c_anchor, input_.odom(), stats_.odometry_jumps, true};
   ++stats_.keyframe_reuses;
   KeyframeFactor f = Factor(c, c, icp, true);
   f.keyframe_j = -1;  // the scan, not a keyframe
@@ -798,7 +770,17 @@ void RbpfSlam::Finish() {
   if (opt_.graph.enabled) OptimizeAndFeedBack(nullptr);
 }
 
+void RbpfSlam::SetKeepScanPath(bool keep) {
+  keep_scan_path_ = keep;
+  if (!keep) std::vector<PathRecord>().swap(path_);
+}
+
+void RbpfSlam::RecordScan(const PathRecord& record) {
+  if (keep_scan_path_) path_.push_back(record);
+}
+
 std::vector<StampedPose2> RbpfSlam::Trajectory() const {
+  if (!keep_scan_path_) return KeyframePoses();
   std::vector<StampedPose2> out;
   out.reserve(path_.size());
   for (const PathRecord& r : path_) out.push_back({r.utime, graph_.pose(r.keyframe) * r.T_kf_base});

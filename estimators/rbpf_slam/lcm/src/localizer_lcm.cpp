@@ -117,7 +117,13 @@ LocalizerNode::LocalizerNode(const LocalizerOptions& options,
       map_(map),
       localizer_(options, map),
       sync_(node_options.merge_latency_s, true),
-      status_(lcm, kProgram) {
+      status_(lcm, kProgram),
+      mounting_wait_(node_options.mounting_wait_s) {
+  if (node_options.scan_trajectory) {
+    throw UsageError(
+        "--scan-trajectory cannot be used with --localize: the localizer publishes its pose on "
+        "RBPF_POSE at every scan; record that");
+  }
   if (node_options.no_odometry) {
     throw UsageError(
         "--no-odometry cannot be used with --localize: the localizer runs its filter on the "
@@ -189,7 +195,9 @@ void LocalizerNode::OnLaserToBase(const Pose2& T) {
                  << " yaw " << T.theta;
   }
   have_laser_to_base_ = true;
-  RunHeldScans();
+  mounting_wait_.Release([this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+    RunScan(scan, odom, lookup);
+  });
 }
 
 void LocalizerNode::OnInitialPose(const bot_core::pose_t& m) {
@@ -214,31 +222,21 @@ void LocalizerNode::OnInitialPose(const bot_core::pose_t& m) {
 void LocalizerNode::Poll() { ProcessReady(false); }
 
 void LocalizerNode::ProcessReady(bool flush) {
+  const auto run = [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+    RunScan(scan, odom, lookup);
+  };
   sync_.Process(
       flush,
-      [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
-        if (!started_ && !have_laser_to_base_ && node_options_.mounting_wait_s > 0.0 &&
-            (held_.empty() || UtimeDifference(held_.front().scan.utime, scan.utime) <
-                                  SecondsToUtime(node_options_.mounting_wait_s))) {
-          held_.push_back({scan, odom != nullptr, odom ? *odom : Pose2(), lookup});
-          if (held_.size() == 1) {
-            status_.SetState(fusionloc::status_t::LEVEL_STARTING,
-                             "waiting up to " + FormatDouble(node_options_.mounting_wait_s) +
-                                 " s for " + ch_laser_to_base_);
-          }
-          return;
+      [&](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+        if (mounting_wait_.Offer(!started_ && !have_laser_to_base_, scan, odom, lookup, run) ==
+            MountingWait::Outcome::kHeldFirst) {
+          status_.SetState(fusionloc::status_t::LEVEL_STARTING,
+                           "waiting up to " + FormatDouble(node_options_.mounting_wait_s) +
+                               " s for " + ch_laser_to_base_);
         }
-        RunHeldScans();
-        RunScan(scan, odom, lookup);
       },
       [this](const std::string& w) { warn_.Warn(w); });
-  if (flush) RunHeldScans();
-}
-
-void LocalizerNode::RunHeldScans() {
-  std::vector<HeldScan> held;
-  held.swap(held_);
-  for (const HeldScan& h : held) RunScan(h.scan, h.has_odom ? &h.odom : nullptr, h.lookup);
+  if (flush) mounting_wait_.Release(run);
 }
 
 void LocalizerNode::RunScan(const LaserScan& scan, const Pose2* odom, const Status& lookup) {

@@ -160,6 +160,26 @@ void ScanOdometrySync::Process(bool flush, const OnScan& on_scan,
 }
 
 // ---- the node ----
+MountingWait::Outcome MountingWait::Offer(bool waiting, const LaserScan& scan, const Pose2* odom,
+                                          const Status& lookup,
+                                          const ScanOdometrySync::OnScan& run) {
+  if (waiting && wait_s_ > 0.0 &&
+      (held_.empty() ||
+       UtimeDifference(held_.front().scan.utime, scan.utime) < SecondsToUtime(wait_s_))) {
+    held_.push_back({scan, odom != nullptr, odom ? *odom : Pose2(), lookup});
+    return held_.size() == 1 ? Outcome::kHeldFirst : Outcome::kHeld;
+  }
+  Release(run);
+  run(scan, odom, lookup);
+  return Outcome::kRun;
+}
+
+void MountingWait::Release(const ScanOdometrySync::OnScan& run) {
+  std::vector<HeldScan> held;
+  held.swap(held_);
+  for (const HeldScan& h : held) run(h.scan, h.has_odom ? &h.odom : nullptr, h.lookup);
+}
+
 void RbpfSlamNodeOptions::AddFlags(CommandLine* cli) {
   cli->AddFlag("map-period-s", &map_period_s,
                "publish RBPF_MAP every this many seconds of data time (0: only at the end)");
@@ -170,6 +190,9 @@ void RbpfSlamNodeOptions::AddFlags(CommandLine* cli) {
   cli->AddFlag("mounting-wait-s", &mounting_wait_s,
                "[s] of scan time the first scans wait for LASER_TO_BASE before the laser is "
                "taken to be at the base origin (0: no wait)");
+  cli->AddFlag("scan-trajectory", &scan_trajectory,
+               "keep every scan's pose and publish them all (smoothed) on RBPF_TRAJECTORY at the "
+               "end, for scoring a log replay (64 bytes per scan in memory; off: keyframe poses)");
   cli->AddCheck([this] { return Check(); });
 }
 
@@ -212,7 +235,9 @@ RbpfSlamNode::RbpfSlamNode(const RbpfSlamOptions& options, const RbpfSlamNodeOpt
       ch_map_(channels(channels::kRbpfMap)),
       slam_(options),
       sync_(node_options.merge_latency_s, !node_options.no_odometry),
-      status_(lcm, kProgram) {
+      status_(lcm, kProgram),
+      mounting_wait_(node_options.mounting_wait_s) {
+  slam_.SetKeepScanPath(node_options.scan_trajectory);
   lcm_->Subscribe<bot_core::rigid_transform_t>(
       ch_laser_to_base_, [this](const bot_core::rigid_transform_t& m, const std::string&) {
         const Pose2 T = Pose2::FromIsometry3(TransformFromLcm(m));
@@ -272,7 +297,9 @@ void RbpfSlamNode::OnLaserToBase(const Pose2& T) {
                  << " yaw " << T.theta;
   }
   have_laser_to_base_ = true;
-  RunHeldScans();
+  mounting_wait_.Release([this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+    RunScan(scan, odom, lookup);
+  });
 }
 
 void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
@@ -287,31 +314,21 @@ void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
 void RbpfSlamNode::Poll() { ProcessReady(false); }
 
 void RbpfSlamNode::ProcessReady(bool flush) {
+  const auto run = [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+    RunScan(scan, odom, lookup);
+  };
   sync_.Process(
       flush,
-      [this](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
-        if (!started_ && !have_laser_to_base_ && node_options_.mounting_wait_s > 0.0 &&
-            (held_.empty() || UtimeDifference(held_.front().scan.utime, scan.utime) <
-                                  SecondsToUtime(node_options_.mounting_wait_s))) {
-          held_.push_back({scan, odom != nullptr, odom ? *odom : Pose2(), lookup});
-          if (held_.size() == 1) {
-            status_.SetState(fusionloc::status_t::LEVEL_STARTING,
-                             "waiting up to " + FormatDouble(node_options_.mounting_wait_s) +
-                                 " s for " + ch_laser_to_base_);
-          }
-          return;
+      [&](const LaserScan& scan, const Pose2* odom, const Status& lookup) {
+        if (mounting_wait_.Offer(!started_ && !have_laser_to_base_, scan, odom, lookup, run) ==
+            MountingWait::Outcome::kHeldFirst) {
+          status_.SetState(fusionloc::status_t::LEVEL_STARTING,
+                           "waiting up to " + FormatDouble(node_options_.mounting_wait_s) +
+                               " s for " + ch_laser_to_base_);
         }
-        RunHeldScans();
-        RunScan(scan, odom, lookup);
       },
       [this](const std::string& w) { warn_.Warn(w); });
-  if (flush) RunHeldScans();
-}
-
-void RbpfSlamNode::RunHeldScans() {
-  std::vector<HeldScan> held;
-  held.swap(held_);
-  for (const HeldScan& h : held) RunScan(h.scan, h.has_odom ? &h.odom : nullptr, h.lookup);
+  if (flush) mounting_wait_.Release(run);
 }
 
 void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const Status& lookup) {
@@ -381,11 +398,17 @@ void RbpfSlamNode::PublishGraph(Utime utime) {
   lcm_->Publish(ch_trajectory_, TrajectoryToLcm(utime, slam_.KeyframePoses()), utime);
 }
 
+void RbpfSlamNode::PublishFinalTrajectory(Utime utime) {
+  // With --scan-trajectory every scan's smoothed pose, else the keyframes (Trajectory() is
+  // KeyframePoses() when the scan path is not kept).
+  lcm_->Publish(ch_trajectory_, TrajectoryToLcm(utime, slam_.Trajectory()), utime);
+}
+
 void RbpfSlamNode::Finish() {
   ProcessReady(true);
   slam_.Finish();
   if (started_) {
-    PublishGraph(last_utime_);
+    PublishFinalTrajectory(last_utime_);
     lcm_->Publish(ch_map_, GridToLcm(last_utime_, slam_.BestMap()), last_utime_);
   }
 }

@@ -29,6 +29,7 @@
 #include "fusionloc/rbpf_slam/icp.hpp"
 #include "fusionloc/rbpf_slam/options.hpp"
 #include "fusionloc/rbpf_slam/pose_graph.hpp"
+#include "fusionloc/rbpf_slam/scan_input.hpp"
 #include "fusionloc/rbpf_slam/tiled_grid.hpp"
 #include "fusionloc/rbpf_slam/types.hpp"
 
@@ -116,8 +117,14 @@ class RbpfSlam {
   // poses from the graph composed with the best particle's motion since that keyframe; a scan
   // the filter did not run on is blended between the filtered scans around it (the next
   // one's correction of the odometry spread over the scans before it).
+  // Without the scan path (SetKeepScanPath(false)): KeyframePoses().
   std::vector<StampedPose2> Trajectory() const;
   std::vector<StampedPose2> KeyframePoses() const;
+  // Whether every scan's record is kept for Trajectory() (default: yes). It costs 64 bytes per
+  // accepted scan (2.3 MB per hour of a 10 Hz laser), unbounded on a robot that runs for hours,
+  // so the LCM node keeps it only when asked (--scan-trajectory). false drops what was kept.
+  void SetKeepScanPath(bool keep);
+  bool keeps_scan_path() const { return keep_scan_path_; }
   // The keyframe pose graph (nodes = keyframes; ICP, filter, weak and loop-closure edges).
   const PoseGraph2D& graph() const { return graph_; }
   // Map of the best particle.
@@ -169,6 +176,7 @@ class RbpfSlam {
   };
 
   void ConvertScan(const LaserScan& scan, ScanResult* result);
+  void RecordScan(const PathRecord& record);  // into path_, if kept
   void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
   void Integrate(Particle* p);
   // Integrates points (base frame) seen from T_world_base into map.
@@ -224,13 +232,8 @@ class RbpfSlam {
   std::vector<Particle> particles_;
   int best_ = 0;
 
-  bool initialized_ = false;
-  fl::Utime last_utime_ = 0;
-  size_t beam_count_ = 0;
-  double rad0_ = 0.0, radstep_ = 0.0;
-  fl::Pose2 last_odom_raw_;       // last accepted raw odometry
-  fl::Pose2 odom_;                // odometry with flagged jumps removed
-  fl::Pose2 odom_at_processed_;   // `odom_` when the filter last ran
+  ScanInput input_;              // validation, stamps, odometry with jumps removed
+  fl::Pose2 odom_at_processed_;  // input_.odom() when the filter last ran
   bool pending_jump_ = false;
   bool keyframe_pending_ = false;  // AddScan deferred the keyframe stage of ...
   fl::Utime pending_utime_ = 0;    // ... the scan at this time
@@ -255,7 +258,8 @@ class RbpfSlam {
   int graph_loop_edges_ = 0;
   int last_closure_keyframe_ = -1;  // newest keyframe with an accepted loop closure (-1: none)
   int optimized_loop_edges_ = 0;
-  std::vector<PathRecord> path_;
+  bool keep_scan_path_ = true;
+  std::vector<PathRecord> path_;  // every accepted scan (if keep_scan_path_)
   RbpfSlamStats stats_;
 };
 

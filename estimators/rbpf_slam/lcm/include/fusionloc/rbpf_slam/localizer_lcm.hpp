@@ -67,7 +67,6 @@ class LocalizerNode : public LcmNode {
   void OnInitialPose(const bot_core::pose_t& msg);
   void ProcessReady(bool flush);
   void RunScan(const LaserScan& scan, const Pose2* odom, const Status& lookup);
-  void RunHeldScans();
   void UpdateStatus(const LocalizationResult& r);
 
   RbpfSlamNodeOptions node_options_;
@@ -82,13 +81,7 @@ class LocalizerNode : public LcmNode {
   RateLimitedWarning warn_;
   bool have_laser_to_base_ = false;
   bool started_ = false;
-  struct HeldScan {
-    LaserScan scan;
-    bool has_odom = false;
-    Pose2 odom;
-    Status lookup;
-  };
-  std::vector<HeldScan> held_;  // first scans waiting for LASER_TO_BASE
+  MountingWait mounting_wait_;  // first scans waiting for LASER_TO_BASE
   Utime last_utime_ = 0, last_map_utime_ = 0;
   std::string last_event_;  // the last rejection / loss, kept in the status message
   double last_fit_ = 0.0;   // the last filter update's fit

@@ -75,6 +75,39 @@ class ScanOdometrySync {
   std::deque<LaserScan> pending_;
 };
 
+// ---- the wait for the laser's mounting ----
+// Holds the first scans (with their odometry) until LASER_TO_BASE arrives or `wait_s` of scan
+// time has passed since the first one held, then hands them on in order before the scan that
+// ended the wait. Shared by the SLAM and the localizer nodes.
+class MountingWait {
+ public:
+  explicit MountingWait(double wait_s) : wait_s_(wait_s) {}
+
+  enum class Outcome {
+    kHeldFirst,  // the scan was held and started the wait (the caller reports it)
+    kHeld,       // the scan was held
+    kRun,        // the held scans, then this one, went to `run`
+  };
+  // `waiting`: no mounting known and nothing run yet (the caller's state). While waiting and
+  // within `wait_s` of the first held scan, the scan is held; otherwise it goes to `run`
+  // after every held scan. wait_s <= 0 never holds.
+  Outcome Offer(bool waiting, const LaserScan& scan, const Pose2* odom, const Status& lookup,
+                const ScanOdometrySync::OnScan& run);
+  // Hands every held scan to `run` (the mounting arrived, or the log ended).
+  void Release(const ScanOdometrySync::OnScan& run);
+  size_t held() const { return held_.size(); }
+
+ private:
+  struct HeldScan {
+    LaserScan scan;
+    bool has_odom = false;
+    Pose2 odom;
+    Status lookup;
+  };
+  double wait_s_;
+  std::vector<HeldScan> held_;
+};
+
 // ---- the node ----
 struct RbpfSlamNodeOptions {
   double map_period_s = 5.0;     // [s] of data time between RBPF_MAP messages (0: only at the end)
@@ -84,6 +117,10 @@ struct RbpfSlamNodeOptions {
   // second, so a process started or respawned mid-run gets it within one period); then the
   // laser is taken to be at the base origin, with a warning. 0: no wait.
   double mounting_wait_s = 2.0;
+  // Keep every scan's pose (RbpfSlam::SetKeepScanPath) and publish them all on RBPF_TRAJECTORY
+  // at the end (a log replay to score); off, a long run's memory stays flat and the final
+  // RBPF_TRAJECTORY holds the keyframes.
+  bool scan_trajectory = false;
 
   void AddFlags(CommandLine* cli);
   std::string Check() const;  // "" or the usage error
@@ -110,9 +147,8 @@ class RbpfSlamNode : public LcmNode {
   // Runs every scan the synchronisation hands on (with flush: every scan still waiting too).
   void ProcessReady(bool flush);
   void RunScan(const LaserScan& scan, const Pose2* odom, const Status& lookup);
-  // Runs the scans held back while waiting for LASER_TO_BASE (mounting_wait_s).
-  void RunHeldScans();
-  void PublishGraph(Utime utime);
+  void PublishGraph(Utime utime);            // the keyframe poses
+  void PublishFinalTrajectory(Utime utime);  // at the end: every scan's, if kept
 
   RbpfSlamNodeOptions node_options_;
   LcmInterface* lcm_;
@@ -124,13 +160,7 @@ class RbpfSlamNode : public LcmNode {
   RateLimitedWarning warn_;
   bool have_laser_to_base_ = false;
   bool started_ = false;
-  struct HeldScan {
-    LaserScan scan;
-    bool has_odom = false;
-    Pose2 odom;
-    Status lookup;
-  };
-  std::vector<HeldScan> held_;  // first scans waiting for LASER_TO_BASE
+  MountingWait mounting_wait_;  // first scans waiting for LASER_TO_BASE
   Utime last_map_utime_ = 0, last_utime_ = 0;
 };
 
