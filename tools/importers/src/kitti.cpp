@@ -41,8 +41,9 @@ bool IsFile(const std::string& p) {
   return fs::is_regular_file(p, ec);
 }
 
-// Sorted *.png files of a folder (error if the folder is missing).
-std::vector<std::string> ListPngs(const std::string& dir) {
+// Sorted files of a folder with extension `ext` (lower case, with the dot; error if the folder
+// is missing).
+std::vector<std::string> ListFiles(const std::string& dir, const std::string& ext_wanted) {
   if (!IsDir(dir)) Fail(dir + ": folder missing (expected the KITTI image folder here)");
   std::vector<std::string> out;
   std::error_code ec;
@@ -50,12 +51,14 @@ std::vector<std::string> ListPngs(const std::string& dir) {
     const fs::path& p = it->path();
     std::string ext = p.extension().string();
     for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    if (ext == ".png") out.push_back(p.string());
+    if (ext == ext_wanted) out.push_back(p.string());
   }
   if (ec) Fail(dir + ": cannot list folder: " + ec.message());
   std::sort(out.begin(), out.end());
   return out;
 }
+
+std::vector<std::string> ListPngs(const std::string& dir) { return ListFiles(dir, ".png"); }
 
 // A whole text file.
 std::string ReadText(const std::string& path) {
@@ -447,6 +450,57 @@ std::vector<Utime> ParseKittiTimestamps(const std::string& text, const std::stri
   return out;
 }
 
+VelodyneScan ReadVelodyneBin(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) Fail(path + ": cannot open Velodyne scan (missing or unreadable)");
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  in.seekg(0, std::ios::beg);
+  if (size < 0) Fail(path + ": cannot read the size of the Velodyne scan");
+  if (size % 16 != 0) {
+    Fail(path + ": " + std::to_string(size) +
+         " bytes is not a multiple of 16 (a KITTI Velodyne scan is N x 4 float32: x, y, z, "
+         "reflectance); truncated or not a Velodyne .bin file");
+  }
+  const size_t n = static_cast<size_t>(size / 16);
+  std::vector<float> raw(4 * n);
+  if (n > 0 && !in.read(reinterpret_cast<char*>(raw.data()), size)) {
+    Fail(path + ": read error after " + std::to_string(in.gcount()) + " of " +
+         std::to_string(size) + " bytes");
+  }
+  VelodyneScan scan;
+  scan.points.reserve(n);
+  scan.intensities.reserve(n);
+  for (size_t i = 0; i < n; ++i) {
+    const float* p = &raw[4 * i];
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]) ||
+        !std::isfinite(p[3])) {
+      ++scan.dropped_non_finite;
+      continue;
+    }
+    scan.points.emplace_back(p[0], p[1], p[2]);
+    scan.intensities.push_back(p[3]);
+  }
+  return scan;
+}
+
+Eigen::Isometry3d ParseKittiVelodyneToCamera(const std::string& text, const std::string& name) {
+  const auto calib = ParseCalibText(text, name);
+  if (!calib.count("Tr")) {
+    Fail(name +
+         ": no 'Tr:' entry (the Velodyne -> camera 0 transform, 12 numbers, needed with "
+         "velodyne/ scans; use the calib.txt of the odometry sequence's data_odometry_calib)");
+  }
+  const auto v = CalibValue(calib, name, "Tr", 12);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) T.linear()(r, c) = v[static_cast<size_t>(4 * r + c)];
+    T.translation()(r) = v[static_cast<size_t>(4 * r + 3)];
+  }
+  T.linear() = NearestRotation(T.linear(), name + " (Tr)");
+  return T;
+}
+
 std::vector<Eigen::Isometry3d> ParseKittiPoses(const std::string& text, const std::string& name) {
   std::vector<Eigen::Isometry3d> out;
   for (const auto& [n, line] : SplitLines(text)) {
@@ -582,6 +636,31 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
          ": no ground truth: neither poses_cam0_from_oxts.txt nor oxts/ here; give "
          "--poses FILE (12 numbers a line, e.g. KITTI odometry poses/NN.txt) or "
          "--no-ground-truth");
+  }
+  // Velodyne scans (optional): one per image, with the transform to camera 0.
+  const std::string vdir = Join(folder, raw ? "velodyne_points/data" : "velodyne");
+  if (IsDir(vdir)) {
+    seq.velodyne_scans = ListFiles(vdir, ".bin");
+    if (seq.velodyne_scans.size() < frames) {
+      Fail(vdir + ": " + std::to_string(seq.velodyne_scans.size()) + " .bin scans for " +
+           std::to_string(frames) + " images in " + left_dir +
+           " (one scan per image needed; remove the folder to convert without laser)");
+    }
+    seq.velodyne_scans.resize(frames);
+    if (raw) {
+      const std::string cpath = Join(folder, "calib_cam_to_cam.txt");
+      const auto rr = CalibValue(ReadCalibFile(cpath), cpath, "R_rect_00", 9);
+      Eigen::Isometry3d T_rect0_cam0 = Eigen::Isometry3d::Identity();
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j)
+          T_rect0_cam0.linear()(i, j) = rr[static_cast<size_t>(3 * i + j)];
+      }
+      T_rect0_cam0.linear() = NearestRotation(T_rect0_cam0.linear(), cpath + " (R_rect_00)");
+      seq.T_cam0_velo = T_rect0_cam0 * ReadRigidCalib(Join(folder, "calib_velo_to_cam.txt"));
+    } else {
+      const std::string cpath = Join(folder, "calib.txt");
+      seq.T_cam0_velo = ParseKittiVelodyneToCamera(ReadText(cpath), cpath);
+    }
   }
   if (static_cast<size_t>(options.start_frame) >= frames) {
     Fail(folder + ": start_frame " + std::to_string(options.start_frame) + " but the folder has " +

@@ -87,7 +87,30 @@ struct KittiSequence {
   std::string poses_path;                           // pose file or oxts folder used; "" if none
   std::vector<Eigen::Isometry3d> T_cam0start_cam0;  // per frame, empty if no poses
   std::vector<std::string> warnings;  // e.g. a times.txt longer than the images (first N used)
+  // Velodyne scans, when the folder has them (odometry: velodyne/*.bin; raw drive:
+  // velodyne_points/data/*.bin): one path per frame, same order as the images; empty if none.
+  std::vector<std::string> velodyne_scans;
+  // Velodyne -> rectified camera 0 (odometry: calib.txt `Tr`; raw drive:
+  // calib_velo_to_cam.txt R, T then R_rect_00). Meaningful only with velodyne_scans.
+  Eigen::Isometry3d T_cam0_velo = Eigen::Isometry3d::Identity();
 };
+
+// One Velodyne scan of a KITTI .bin file (N x 4 float32: x, y, z [m] in the Velodyne frame,
+// reflectance in [0, 1]).
+struct VelodyneScan {
+  std::vector<Eigen::Vector3f> points;  // [m] Velodyne frame, finite points only
+  std::vector<float> intensities;       // [-] reflectance, one per point
+  int dropped_non_finite = 0;           // points with a NaN/inf coordinate or intensity, dropped
+};
+
+// Reads a KITTI Velodyne .bin file. Throws std::runtime_error naming the file if it cannot be
+// read or its size is not a multiple of 16 bytes (4 float32 per point).
+VelodyneScan ReadVelodyneBin(const std::string& path);
+
+// `Tr` (3x4 row-major, Velodyne -> camera 0) from the text of an odometry calib.txt (`name`
+// stands for the file in errors). Throws std::runtime_error naming the file if `Tr` is missing
+// (with the fix), malformed, or its 3x3 part is not a rotation.
+Eigen::Isometry3d ParseKittiVelodyneToCamera(const std::string& text, const std::string& name);
 
 // Scans and validates a folder (layout, image lists, time stamps, calibration, poses).
 // Throws std::runtime_error naming the file (and line) and the fix on any inconsistency.
