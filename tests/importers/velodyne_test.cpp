@@ -35,7 +35,7 @@ std::string ErrorOf(const std::function<void()>& f) {
   return "";
 }
 
-TEST(VelodyneTest, ReadsPointsAndDropsNonFinite) {
+TEST(KittiVelodyneTest, ReadsPointsAndDropsNonFinite) {
   TempDir dir;
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float inf = std::numeric_limits<float>::infinity();
@@ -54,7 +54,7 @@ TEST(VelodyneTest, ReadsPointsAndDropsNonFinite) {
   EXPECT_FLOAT_EQ(s.intensities[1], 0.f);
 }
 
-TEST(VelodyneTest, EmptyFileIsAnEmptyScan) {
+TEST(KittiVelodyneTest, EmptyFileIsAnEmptyScan) {
   TempDir dir;
   WriteFloats(dir.file("e.bin"), {});
   const VelodyneScan s = ReadVelodyneBin(dir.file("e.bin"));
@@ -62,7 +62,7 @@ TEST(VelodyneTest, EmptyFileIsAnEmptyScan) {
   EXPECT_EQ(s.dropped_non_finite, 0);
 }
 
-TEST(VelodyneBadInputTest, SizeNotAMultipleOf16NamesTheFile) {
+TEST(KittiVelodyneBadInputTest, SizeNotAMultipleOf16NamesTheFile) {
   TempDir dir;
   WriteFloats(dir.file("t.bin"), {1.f, 2.f, 3.f, 0.5f, 1.f, 2.f});  // 24 bytes
   const std::string e = ErrorOf([&] { ReadVelodyneBin(dir.file("t.bin")); });
@@ -73,7 +73,7 @@ TEST(VelodyneBadInputTest, SizeNotAMultipleOf16NamesTheFile) {
   EXPECT_NE(m.find("missing.bin"), std::string::npos) << m;
 }
 
-TEST(VelodyneTest, ParsesTr) {
+TEST(KittiVelodyneTest, ParsesTr) {
   const std::string calib =
       "P0: 50 0 5 0 0 50 3 0 0 0 1 0\n"
       "Tr: 0 -1 0 0.1 0 0 -1 -0.2 1 0 0 -0.3\n";
@@ -84,7 +84,7 @@ TEST(VelodyneTest, ParsesTr) {
   EXPECT_TRUE(T.translation().isApprox(Eigen::Vector3d(0.1, -0.2, -0.3)));
 }
 
-TEST(VelodyneBadInputTest, MissingOrBadTrNamesTheFile) {
+TEST(KittiVelodyneBadInputTest, MissingOrBadTrNamesTheFile) {
   const std::string missing =
       ErrorOf([] { ParseKittiVelodyneToCamera("P0: 1 0 0 0 0 1 0 0 0 0 1 0\n", "seq/calib.txt"); });
   EXPECT_NE(missing.find("seq/calib.txt"), std::string::npos) << missing;
@@ -121,7 +121,7 @@ const char* kCalibWithTr =
     "P0: 50 0 5 0 0 50 3 0 0 0 1 0\nP1: 50 0 5 -25 0 50 3 0 0 0 1 0\n"
     "Tr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n";
 
-TEST(VelodyneTest, FolderListsOneScanPerFrameWithTheTransform) {
+TEST(KittiVelodyneTest, FolderListsOneScanPerFrameWithTheTransform) {
   TempDir dir;
   const std::string root = OdometryFolder(dir, 3, 3, kCalibWithTr);
   KittiOptions opts;
@@ -132,7 +132,7 @@ TEST(VelodyneTest, FolderListsOneScanPerFrameWithTheTransform) {
   EXPECT_TRUE((seq.T_cam0_velo * Eigen::Vector3d::UnitX()).isApprox(Eigen::Vector3d::UnitZ()));
 }
 
-TEST(VelodyneBadInputTest, FolderWithScansButNoTrOrTooFewScans) {
+TEST(KittiVelodyneBadInputTest, FolderWithScansButNoTrOrTooFewScans) {
   TempDir a, b;
   KittiOptions opts;
   opts.allow_no_ground_truth = true;
@@ -146,7 +146,7 @@ TEST(VelodyneBadInputTest, FolderWithScansButNoTrOrTooFewScans) {
   EXPECT_NE(e2.find("2 .bin scans for 3 images"), std::string::npos) << e2;
 }
 
-TEST(VelodyneTest, RealSnippetHasScansInFrontOfTheCamera) {
+TEST(KittiVelodyneTest, RealSnippetHasScansInFrontOfTheCamera) {
   const std::string folder = fl::test::SharedDataDir() + "/lidar_stereo/kitti_odometry_04_f000-050";
   FL_REQUIRE_SHARED_FILE(folder + "/velodyne/000000.bin");
   KittiOptions opts;
