@@ -100,9 +100,11 @@ inline void PlanePair(const cv::Mat& texture, const fl::vo::StereoCalibration& c
 
 // Random points in front of the rig at a, seen by the rig at b = a * T_a_b, observed with
 // Gaussian pixel noise; the first `outliers` correspondences get wrong observations at b.
+// truth (optional): the true point of each correspondence in frame a.
 inline std::vector<fl::vo::StereoCorrespondence> MakeCorrespondences(
     const fl::vo::StereoCamera& cam, const Eigen::Isometry3d& T_a_b, int n, int outliers,
-    double noise_px, uint32_t seed) {
+    double noise_px, uint32_t seed, std::vector<Eigen::Vector3d>* truth = nullptr) {
+  if (truth != nullptr) truth->clear();
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> ux(-8, 8), uy(-3, 2), uz(3, 40), uo(-60, 60);
   std::normal_distribution<double> noise(0.0, noise_px > 0 ? noise_px : 1.0);
@@ -124,6 +126,39 @@ inline std::vector<fl::vo::StereoCorrespondence> MakeCorrespondences(
     c.p_a = cam.Triangulate(c.obs_a(0), c.obs_a(1), c.obs_a(0) - c.obs_a(2));
     c.p_b = cam.Triangulate(c.obs_b(0), c.obs_b(1), c.obs_b(0) - c.obs_b(2));
     out.push_back(c);
+    if (truth != nullptr) truth->push_back(p_a);
+  }
+  return out;
+}
+
+// Laser-like 3D measurements of the first `fraction` of the correspondences (true points with
+// Gaussian depth noise depth_sigma_m along each observed pixel's ray, at a and at b), as the
+// laser-aided mode gives them (PointMeasurement: m = depth * ray; lateral sigma
+// 5 pixel_sigma_px depth / fx, the default laser_depth.point_lateral_sigma_px at 0.5 px).
+inline fl::vo::PointMeasurements MakeLaserMeasurements(
+    const fl::vo::StereoCamera& cam, const Eigen::Isometry3d& T_a_b,
+    const std::vector<fl::vo::StereoCorrespondence>& corr,
+    const std::vector<Eigen::Vector3d>& truth, double fraction, double depth_sigma_m,
+    double pixel_sigma_px, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, depth_sigma_m);
+  fl::vo::PointMeasurements out;
+  out.pixel_sigma_px = pixel_sigma_px;
+  out.per_correspondence.resize(corr.size());
+  const Eigen::Isometry3d T_b_a = T_a_b.inverse();
+  const size_t count = static_cast<size_t>(fraction * static_cast<double>(corr.size()));
+  for (size_t i = 0; i < count && i < truth.size(); ++i) {
+    fl::vo::PointMeasurement& m = out.per_correspondence[i];
+    const auto measure = [&](const Eigen::Vector3d& obs, const Eigen::Vector3d& p_true,
+                             Eigen::Vector3d* mp, Eigen::Matrix3d* W) {
+      const Eigen::Vector3d ray((obs(0) - cam.cx) / cam.fx, (obs(1) - cam.cy) / cam.fy, 1.0);
+      const double z = p_true.z() + noise(rng);
+      *mp = z * ray;
+      *W = fl::vo::PointSqrtInformation(ray, depth_sigma_m, 5.0 * pixel_sigma_px * z / cam.fx);
+    };
+    measure(corr[i].obs_a, truth[i], &m.m_a, &m.W_a);
+    measure(corr[i].obs_b, T_b_a * truth[i], &m.m_b, &m.W_b);
+    m.has_a = m.has_b = true;
   }
   return out;
 }

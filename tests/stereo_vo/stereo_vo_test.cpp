@@ -78,6 +78,102 @@ TEST_F(StereoVoTest, TracksSidewaysMotionOfAPlane) {
   EXPECT_EQ(factors, 2);
 }
 
+// The scan of the plane at kDepth in the left camera frame (scan lines every 3 px, a point
+// every 2 px along them).
+LaserCloud PlaneCloud(const StereoCalibration& c, Utime utime) {
+  LaserCloud cloud;
+  cloud.utime = utime;
+  for (double v = 0.5; v < c.height; v += 3.0) {
+    for (double u = 0.5; u < c.width; u += 2.0) {
+      cloud.points.emplace_back(static_cast<float>((u - c.cx) * kDepth / c.fx),
+                                static_cast<float>((v - c.cy) * kDepth / c.fy),
+                                static_cast<float>(kDepth));
+    }
+  }
+  return cloud;
+}
+
+TEST_F(StereoVoTest, LaserAidedModeUsesTheScanAndFallsBackOnBadInput) {
+  StereoVoOptions opts;
+  opts.laser_depth.enabled = true;
+  StereoVo vo(opts, calib_);
+  cv::Mat l, r;
+  for (int k = 0; k <= 5; ++k) {
+    Pair(k, &l, &r);
+    const Utime t = kT0 + k * kDt;
+    LaserCloud cloud = PlaneCloud(calib_, t);
+    const LaserCloud* input = &cloud;
+    std::string expect;
+    if (k == 2) {
+      input = nullptr;
+      expect = "no laser scan";
+    } else if (k == 3) {
+      cloud.points.clear();
+      expect = "0 of 0 points";
+    } else if (k == 4) {  // left in a laser frame (x forward, y left, z up)
+      for (auto& p : cloud.points) p = Eigen::Vector3f(p.z(), -p.x(), -p.y());
+      expect = "is it in the left camera frame";
+    } else if (k == 5) {
+      cloud.utime = t + 200000;
+      expect = "0.2";
+    }
+    const StereoVoResult res = vo.AddStereoFrame(t, l, r, input);
+    if (k == 0) {
+      ASSERT_EQ(res.state, TrackingState::kInitialized) << res.message;
+      continue;
+    }
+    ASSERT_EQ(res.state, TrackingState::kTracked) << k << ": " << res.message;
+    EXPECT_NEAR(res.T_prev_camera.translation().x(), kStep, 0.002) << k;
+    EXPECT_NEAR(res.T_prev_camera.translation().z(), 0.0, 0.01) << k;
+    if (expect.empty()) {
+      EXPECT_EQ(res.laser_message, "") << k;
+      EXPECT_GT(res.stats.laser_points_in_view, 20000) << k;
+      EXPECT_GT(res.stats.laser_depth_cur, 50) << k;
+      EXPECT_GT(res.stats.laser_depth_prev, 50) << k;
+    } else {
+      EXPECT_NE(res.laser_message.find(expect), std::string::npos)
+          << k << ": " << res.laser_message;
+      EXPECT_NE(res.laser_message.find("plain stereo"), std::string::npos) << res.laser_message;
+      EXPECT_NE(res.message.find("laser: "), std::string::npos) << res.message;
+      EXPECT_EQ(res.stats.laser_depth_cur, 0) << k;
+    }
+  }
+}
+
+TEST_F(StereoVoTest, LaserModeOffIgnoresTheScanBitForBit) {
+  StereoVoOptions opts;
+  StereoVo plain(opts, calib_), given(opts, calib_);
+  cv::Mat l, r;
+  for (int k = 0; k <= 3; ++k) {
+    Pair(k, &l, &r);
+    const LaserCloud cloud = PlaneCloud(calib_, kT0 + k * kDt);
+    const StereoVoResult a = plain.AddStereoFrame(kT0 + k * kDt, l, r);
+    const StereoVoResult b = given.AddStereoFrame(kT0 + k * kDt, l, r, &cloud);
+    EXPECT_EQ(a.state, b.state);
+    EXPECT_TRUE(a.T_world_camera.matrix() == b.T_world_camera.matrix()) << k;
+    EXPECT_EQ(b.laser_message, "");
+    EXPECT_EQ(b.stats.laser_points_in_view, 0);
+  }
+}
+
+TEST(StereoVoOptionsLaserTest, LaserModeNeedsTheAnalyticSolver) {
+  StereoVoOptions o;
+  o.laser_depth.enabled = true;
+  EXPECT_TRUE(o.Validate().ok());
+  o.refine.use_ceres = true;
+  o.estimate_disparity_offset = false;
+  const fl::Status s = o.Validate();
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("laser_depth.enabled"), std::string::npos) << s.message();
+  o = StereoVoOptions();
+  o.laser_depth.search_radius_px = 0;
+  EXPECT_NE(o.Validate().message().find("laser_depth.search_radius_px"), std::string::npos);
+  EXPECT_THROW(fl::LoadYamlString<StereoVoOptions>("laser_depth: {enabeld: true}\n"),
+               fl::ConfigError);
+  EXPECT_TRUE(
+      fl::LoadYamlString<StereoVoOptions>("laser_depth: {enabled: true}\n").laser_depth.enabled);
+}
+
 TEST_F(StereoVoTest, RejectsImagesThatDoNotMatchTheCalibration) {
   StereoVo vo(StereoVoOptions(), calib_);
   cv::Mat l, r;

@@ -23,10 +23,11 @@ fl::Status LaserDepthOptions::Validate() const {
     return fl::Status::Error(
         "laser_depth.max_plane_residual_rel and max_depth_spread_rel must be > 0");
   }
-  if (!(range_sigma_m > 0 && stereo_disparity_sigma_px > 0 && max_stereo_disagreement_sigma > 0)) {
+  if (!(range_sigma_m > 0 && stereo_disparity_sigma_px > 0 && max_stereo_disagreement_sigma > 0 &&
+        point_lateral_sigma_px > 0)) {
     return fl::Status::Error(
-        "laser_depth.range_sigma_m, stereo_disparity_sigma_px and "
-        "max_stereo_disagreement_sigma must be > 0");
+        "laser_depth.range_sigma_m, stereo_disparity_sigma_px, max_stereo_disagreement_sigma and "
+        "point_lateral_sigma_px must be > 0");
   }
   if (min_points_in_view < 0) {
     return fl::Status::Error("laser_depth.min_points_in_view must be >= 0");

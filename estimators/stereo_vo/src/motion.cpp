@@ -256,7 +256,8 @@ class TwoViewBa {
   using MatG3 = Eigen::Matrix<double, kMaxGlobal, 3>;
 
   TwoViewBa(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
-            const std::vector<int>& inliers, double huber_px, double prior_weight)
+            const std::vector<int>& inliers, double huber_px, double prior_weight,
+            const PointMeasurements* measured = nullptr)
       : cam_(cam), huber_(huber_px), prior_weight_(prior_weight), ng_(prior_weight > 0 ? 7 : 6) {
     obs_a_.reserve(inliers.size());
     obs_b_.reserve(inliers.size());
@@ -267,12 +268,35 @@ class TwoViewBa {
       obs_b_.push_back(c.obs_b);
       pts_.push_back(c.p_a);
     }
+    if (measured != nullptr && measured->per_correspondence.size() == corr.size()) {
+      const double s = measured->pixel_sigma_px;
+      for (size_t k = 0; k < inliers.size(); ++k) {
+        const PointMeasurement& m = measured->per_correspondence[static_cast<size_t>(inliers[k])];
+        if (!m.has_a && !m.has_b) continue;
+        Measured e;
+        e.k = k;
+        e.has_a = m.has_a;
+        e.has_b = m.has_b;
+        e.m_a = m.m_a;
+        e.m_b = m.m_b;
+        e.W_a = s * m.W_a;
+        e.W_b = s * m.W_b;
+        if (m.has_a) pts_[k] = m.m_a;
+        measured_.push_back(e);
+      }
+    }
     hpp_.resize(pts_.size());
     hgp_.resize(pts_.size());
     gp_.resize(pts_.size());
   }
 
   int size() const { return static_cast<int>(pts_.size()); }
+  // 3D point error components (3 per measurement), for the degrees of freedom.
+  int measured_components() const {
+    int n = 0;
+    for (const Measured& e : measured_) n += 3 * (static_cast<int>(e.has_a) + e.has_b);
+    return n;
+  }
   int num_global() const { return ng_; }
   const std::vector<Vec3>& points() const { return pts_; }
 
@@ -288,6 +312,11 @@ class TwoViewBa {
       if (!Residual(Rt * (pts[k] - T.translation()), obs_b_[k], c, &r)) return kInf;
       cost += Rho(r.squaredNorm());
     }
+    for (const Measured& e : measured_) {
+      const Vec3& p = pts[e.k];
+      if (e.has_a) cost += Rho((e.W_a * (p - e.m_a)).squaredNorm());
+      if (e.has_b) cost += Rho((e.W_b * (Rt * (p - T.translation()) - e.m_b)).squaredNorm());
+    }
     return 0.5 * cost + 0.5 * prior_weight_ * c * c;
   }
 
@@ -300,7 +329,14 @@ class TwoViewBa {
     MatG Hgg = MatG::Zero();
     VecG gg = VecG::Zero();
     const double clip = 9.0 * huber_ * huber_;
-    double csq = 0, psq = 0;
+    double csq = 0, psq = 0, psq_measured = 0;
+    const auto AddSquares = [clip](const Vec3& r, double* clipped, double* plain) {
+      for (int i = 0; i < 3; ++i) {
+        *clipped += std::min(r(i) * r(i), clip);
+        *plain += r(i) * r(i);
+      }
+    };
+    size_t next_measured = 0;
     for (size_t k = 0; k < pts_.size(); ++k) {
       const Vec3& p = pts_[k];
       const Vec3 q = Rt * (p - T.translation());
@@ -330,6 +366,32 @@ class TwoViewBa {
         Hgg(6, 6) += wa * ga * ga;
         gg(6) += -wa * ga * ra(2);
         Hgp.row(6) += -wa * ga * Ja.row(2);
+      }
+      if (next_measured < measured_.size() && measured_[next_measured].k == k) {
+        // 3D point errors: d r_a / d p = W_a; d r_b / d p = W_b R^T, d r_b / d [rho phi] =
+        // W_b [-I, [q]x] (as for the reprojection above, without the projection).
+        const Measured& e = measured_[next_measured++];
+        if (e.has_a) {
+          const Vec3 r = e.W_a * (p - e.m_a);
+          const double w = robust ? Weight(r.squaredNorm()) : 1.0;
+          AddSquares(r, &csq, &psq_measured);
+          Hpp += w * e.W_a.transpose() * e.W_a;
+          gp += w * e.W_a.transpose() * r;
+        }
+        if (e.has_b) {
+          const Vec3 r = e.W_b * (q - e.m_b);
+          const double w = robust ? Weight(r.squaredNorm()) : 1.0;
+          AddSquares(r, &csq, &psq_measured);
+          const Mat3 Jp = e.W_b * Rt;
+          Eigen::Matrix<double, 3, kMaxGlobal> Jm = Eigen::Matrix<double, 3, kMaxGlobal>::Zero();
+          Jm.block<3, 3>(0, 0) = -e.W_b;
+          Jm.block<3, 3>(0, 3) = e.W_b * Skew(q);
+          Hpp += w * Jp.transpose() * Jp;
+          gp += w * Jp.transpose() * r;
+          Hgp += w * Jm.transpose() * Jp;
+          Hgg += w * Jm.transpose() * Jm;
+          gg += w * Jm.transpose() * r;
+        }
       }
       if (lambda > 0) Hpp.diagonal() *= (1.0 + lambda);
       hpp_[k] = Hpp.inverse();
@@ -394,7 +456,16 @@ class TwoViewBa {
     return s <= h2 ? 1.0 : huber_ / std::sqrt(s);
   }
 
+  // A point's 3D measurements (PointMeasurements), W scaled by the pixel sigma; k: the point.
+  struct Measured {
+    size_t k = 0;
+    bool has_a = false, has_b = false;
+    Vec3 m_a, m_b;
+    Mat3 W_a, W_b;
+  };
+
   StereoCamera cam_;
+  std::vector<Measured> measured_;  // in increasing k
   double huber_, prior_weight_;
   int ng_;
   std::vector<Vec3> obs_a_, obs_b_, pts_;
@@ -406,13 +477,13 @@ class TwoViewBa {
 RefineResult RefineAnalytic(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
                             const std::vector<int>& inliers, const Eigen::Isometry3d& T0,
                             const RefineOptions& options, std::vector<Eigen::Vector3d>* points_a,
-                            const OffsetPrior* offset) {
+                            const OffsetPrior* offset, const PointMeasurements* measured) {
   RefineResult result;
   result.T_a_b = T0;
   if (inliers.size() < 3) return result;
   const double prior_weight =
       offset != nullptr ? offset->sigma_px * offset->sigma_px / offset->variance_px2 : 0.0;
-  TwoViewBa ba(cam, corr, inliers, options.huber_px, prior_weight);
+  TwoViewBa ba(cam, corr, inliers, options.huber_px, prior_weight, measured);
   Eigen::Isometry3d T = T0;
   double c = 0;
   double cost = ba.Cost(T, c, ba.points());
@@ -460,7 +531,7 @@ RefineResult RefineAnalytic(const StereoCamera& cam, const std::vector<StereoCor
   double clipped_sq = 0, plain_sq = 0;
   if (!ba.Build(T, c, false, 0.0, &S, &s, &clipped_sq, &plain_sq)) return result;
   const double n = static_cast<double>(ba.size());
-  const double dof = std::max(1.0, 3.0 * n - 6.0);
+  const double dof = std::max(1.0, 3.0 * n - 6.0 + ba.measured_components());
   const double sigma2 = std::max(options.min_sigma_px * options.min_sigma_px, clipped_sq / dof);
   result.rms_px = std::sqrt(plain_sq / (6.0 * n));
   result.sigma_px = std::sqrt(sigma2);
@@ -493,16 +564,28 @@ RefineResult RefineAnalytic(const StereoCamera& cam, const std::vector<StereoCor
 
 }  // namespace
 
+Eigen::Matrix3d PointSqrtInformation(const Eigen::Vector3d& ray, double sigma_depth_m,
+                                     double sigma_lateral_m) {
+  // Sigma^-1 = (1/lat^2) (I - e e^T) + (1/dep^2) e e^T (the eigen-decomposition of Sigma), so
+  // Sigma^-1/2 = (1/lat) (I - e e^T) + (1/dep) e e^T. sigma_depth is along z; along the
+  // unit ray it is sigma_depth |ray|.
+  const Eigen::Vector3d e = ray.normalized();
+  const double dep = sigma_depth_m * ray.norm();
+  const Eigen::Matrix3d P = e * e.transpose();
+  return (Eigen::Matrix3d::Identity() - P) / sigma_lateral_m + P / dep;
+}
+
 RefineResult RefineMotion(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
                           const std::vector<int>& inliers, const Eigen::Isometry3d& T_a_b_initial,
                           const RefineOptions& options, std::vector<Eigen::Vector3d>* points_a,
-                          const OffsetPrior* offset) {
+                          const OffsetPrior* offset, const PointMeasurements* measured) {
   if (options.optimize_points && !options.use_ceres) {
-    return RefineAnalytic(cam, corr, inliers, T_a_b_initial, options, points_a, offset);
+    return RefineAnalytic(cam, corr, inliers, T_a_b_initial, options, points_a, offset, measured);
   }
-  if (offset != nullptr) {
-    // Only the analytic two-view bundle adjustment models the offset (Validate rejects the
-    // combination in StereoVoOptions); refuse rather than silently ignore it.
+  if (offset != nullptr || measured != nullptr) {
+    // Only the analytic two-view bundle adjustment models the offset and the 3D point errors
+    // (Validate rejects the combination in StereoVoOptions); refuse rather than silently
+    // ignore them.
     RefineResult refused;
     refused.T_a_b = T_a_b_initial;
     return refused;

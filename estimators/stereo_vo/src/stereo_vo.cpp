@@ -125,6 +125,16 @@ fl::Status StereoVoOptions::Validate() const {
   if (!(max_speed_mps > 0 && max_gap_s > 0)) {
     return fl::Status::Error("max_speed_mps and max_gap_s must be > 0");
   }
+  if (auto s = laser_depth.Validate(); !s.ok()) return s;
+  if (!(laser_max_time_offset_s >= 0)) {
+    return fl::Status::Error("laser_max_time_offset_s must be >= 0");
+  }
+  if (laser_depth.enabled && (!use_refinement || !refine.optimize_points || refine.use_ceres)) {
+    return fl::Status::Error(
+        "laser_depth.enabled needs the analytic two-view bundle adjustment (the 3D point errors "
+        "live there): set use_refinement true, refine.optimize_points true and refine.use_ceres "
+        "false, or laser_depth.enabled false");
+  }
   return fl::Status::Ok();
 }
 
@@ -146,7 +156,7 @@ StereoVo::StereoVo(const StereoVoOptions& options, const StereoCalibration& cali
 StereoVo::~StereoVo() = default;
 
 StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
-                                        const cv::Mat& right_in) {
+                                        const cv::Mat& right_in, const LaserCloud* laser) {
   const double t_start = NowMs();
   StereoVoResult result;
   result.utime = utime;
@@ -185,6 +195,9 @@ StereoVoResult StereoVo::AddStereoFrame(Utime utime, const cv::Mat& left_in,
     return Reject(std::move(result), TrackingState::kNotTracked,
                   "too few stereo matches (" + std::to_string(cur->stereo_matches) + ")", t_start);
   }
+
+  // ---- laser-aided mode: the scan projected into the image ----
+  if (options_.laser_depth.enabled) AttachLaser(laser, cur.get(), &result);
 
   // ---- first frame, or the first after a gap too long to bridge ----
   if (!last_good_ || static_cast<double>(utime - last_good_->utime) * 1e-6 > options_.max_gap_s) {
@@ -227,14 +240,25 @@ StereoVoResult StereoVo::Track(std::unique_ptr<stages::StereoFrame> cur, StereoV
                   t_start);
   }
 
-  // ---- refinement ----
+  // ---- refinement (laser-aided: with the 3D point errors of the features with laser depth) ----
   const double offset_pred_var = PredictedOffsetVariance(utime);
   OffsetPrior offset_prior;
   offset_prior.variance_px2 = kReuse * offset_pred_var;
   offset_prior.sigma_px = pixel_sigma_px_;
-  const stages::Refinement refined =
-      stages::RefineStage(camera_, corr, match.ransac,
-                          options_.estimate_disparity_offset ? &offset_prior : nullptr, options_);
+  stages::LaserAssociation laser;
+  const bool use_laser = options_.laser_depth.enabled && (prev.laser || cur->laser);
+  if (use_laser) {
+    const double tl = NowMs();
+    laser = stages::AssociateLaserDepth(camera_, prev, *cur, corr, pixel_sigma_px_,
+                                        options_.laser_depth);
+    result.stats.laser_depth_prev = laser.prev;
+    result.stats.laser_depth_cur = laser.cur;
+    result.stats.laser_depth_rejected = laser.rejected;
+    result.stats.ms_laser += NowMs() - tl;
+  }
+  const stages::Refinement refined = stages::RefineStage(
+      camera_, corr, match.ransac, options_.estimate_disparity_offset ? &offset_prior : nullptr,
+      options_, use_laser ? &laser.measured : nullptr);
   result.stats.reprojection_rms_px = refined.rms_px;
   if (!refined.ok) {
     result.stats.ms_motion = NowMs() - t0;
@@ -267,6 +291,38 @@ StereoVoResult StereoVo::Track(std::unique_ptr<stages::StereoFrame> cur, StereoV
   result.message = msg.str();
   last_good_ = std::move(cur);
   return Finish(std::move(result), t_start);
+}
+
+void StereoVo::AttachLaser(const LaserCloud* laser, stages::StereoFrame* frame,
+                           StereoVoResult* result) const {
+  const double t0 = NowMs();
+  std::string why;
+  if (laser == nullptr) {
+    why = "no laser scan for this frame";
+  } else if (std::abs(static_cast<double>(laser->utime - frame->utime)) * 1e-6 >
+             options_.laser_max_time_offset_s) {
+    why = "laser scan " + std::to_string(static_cast<double>(laser->utime - frame->utime) * 1e-6) +
+          " s from the images (laser_max_time_offset_s " +
+          std::to_string(options_.laser_max_time_offset_s) + ")";
+  } else {
+    auto map = std::make_shared<const LaserDepthMap>(
+        options_.laser_depth, camera_, calibration_.width, calibration_.height, laser->points);
+    result->stats.laser_points_in_view = map->points_in_view();
+    if (map->usable()) {
+      frame->laser = std::move(map);
+    } else {
+      why = "laser scan has " + std::to_string(map->points_in_view()) + " of " +
+            std::to_string(laser->points.size()) + " points in front of the camera in the image (" +
+            "laser_depth.min_points_in_view " +
+            std::to_string(options_.laser_depth.min_points_in_view) +
+            "): is it in the left camera frame (extrinsic applied)?";
+    }
+  }
+  if (!why.empty()) {
+    result->laser_message = why + "; plain stereo for this frame";
+    result->message = "laser: " + result->laser_message;
+  }
+  result->stats.ms_laser = NowMs() - t0;
 }
 
 StereoVoResult StereoVo::Reject(StereoVoResult result, TrackingState state, const std::string& why,

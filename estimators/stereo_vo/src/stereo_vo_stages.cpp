@@ -268,15 +268,15 @@ std::vector<int> SelectInliers(const StereoCamera& camera,
 
 Refinement RefineStage(const StereoCamera& camera, const std::vector<StereoCorrespondence>& corr,
                        const RansacResult& ransac, const OffsetPrior* offset_prior,
-                       const StereoVoOptions& options) {
+                       const StereoVoOptions& options, const PointMeasurements* measured) {
   Refinement out;
   out.ok = true;
   out.T_a_b = ransac.T_a_b;
   out.inliers = ransac.inliers;
   if (!options.use_refinement) return out;
   for (int round = 0; round < options.refine_rounds; ++round) {
-    out.last =
-        RefineMotion(camera, corr, out.inliers, out.T_a_b, options.refine, nullptr, offset_prior);
+    out.last = RefineMotion(camera, corr, out.inliers, out.T_a_b, options.refine, nullptr,
+                            offset_prior, measured);
     if (!out.last.ok) {
       out.ok = false;
       return out;
@@ -290,6 +290,42 @@ Refinement RefineStage(const StereoCamera& camera, const std::vector<StereoCorre
         SelectInliers(camera, corr, out.T_a_b, options.ransac.inlier_threshold_px);
     if (static_cast<int>(next.size()) < options.ransac.min_inliers) break;
     out.inliers.swap(next);
+  }
+  return out;
+}
+
+LaserAssociation AssociateLaserDepth(const StereoCamera& camera, const StereoFrame& prev,
+                                     const StereoFrame& cur,
+                                     const std::vector<StereoCorrespondence>& corr,
+                                     double pixel_sigma_px, const LaserDepthOptions& options) {
+  LaserAssociation out;
+  out.measured.pixel_sigma_px = pixel_sigma_px;
+  out.measured.per_correspondence.resize(corr.size());
+  const auto one = [&](const LaserDepthMap* map, const Eigen::Vector3d& obs,
+                       const Eigen::Vector3d& p_stereo, bool* has, Eigen::Vector3d* m,
+                       Eigen::Matrix3d* W) {
+    if (map == nullptr) return;
+    const double z = p_stereo.z();
+    const FeatureDepth d = map->Associate(
+        obs(0), obs(1), z, StereoDepthSigma(camera, z, options.stereo_disparity_sigma_px));
+    if (d.source == DepthSource::kLaser || d.source == DepthSource::kBoth) {
+      const Eigen::Vector3d ray((obs(0) - camera.cx) / camera.fx, (obs(1) - camera.cy) / camera.fy,
+                                1.0);
+      *has = true;
+      *m = d.depth_m * ray;
+      *W = PointSqrtInformation(ray, d.sigma_m,
+                                options.point_lateral_sigma_px * d.depth_m / camera.fx);
+    } else if (d.verdict == LaserDepthVerdict::kInconsistent ||
+               d.verdict == LaserDepthVerdict::kStereoDisagrees) {
+      ++out.rejected;
+    }
+  };
+  for (size_t i = 0; i < corr.size(); ++i) {
+    PointMeasurement& pm = out.measured.per_correspondence[i];
+    one(prev.laser.get(), corr[i].obs_a, corr[i].p_a, &pm.has_a, &pm.m_a, &pm.W_a);
+    one(cur.laser.get(), corr[i].obs_b, corr[i].p_b, &pm.has_b, &pm.m_b, &pm.W_b);
+    out.prev += pm.has_a;
+    out.cur += pm.has_b;
   }
   return out;
 }

@@ -50,6 +50,10 @@ struct LaserDepthOptions {
   double range_sigma_m = 0.03;           // [m] laser range noise (HDL-64E: about 2 cm)
   double max_stereo_disagreement_sigma = 3.0;  // [-] allowed |z_laser - z_stereo| in sigmas
   double stereo_disparity_sigma_px = 0.3;      // [px] disparity noise for the stereo depth sigma
+  // [px] lateral sigma of a laser-depth point across its ray, in pixels at its depth, in the
+  // motion's 3D point error: its direction is the feature's own pixel, already in the
+  // reprojection error, so it is kept weak (depth is what the laser adds).
+  double point_lateral_sigma_px = 2.5;
   // A cloud with fewer points in the image than this is unusable (no scan, a scan in the wrong
   // frame): the frame runs on plain stereo and the result says so.
   int min_points_in_view = 200;
@@ -67,6 +71,7 @@ struct LaserDepthOptions {
     a->Visit("range_sigma_m", &range_sigma_m);
     a->Visit("max_stereo_disagreement_sigma", &max_stereo_disagreement_sigma);
     a->Visit("stereo_disparity_sigma_px", &stereo_disparity_sigma_px);
+    a->Visit("point_lateral_sigma_px", &point_lateral_sigma_px);
     a->Visit("min_points_in_view", &min_points_in_view);
   }
   fl::Status Validate() const;  // error naming the key (prefix laser_depth.) or OK

@@ -163,6 +163,35 @@ struct RefineResult {
   double offset_data_information = 0;
 };
 
+// Measured 3D positions of the correspondences' points (laser-aided mode, laser_depth.hpp): the
+// improved objective of LV-SLAM. A point with a measurement at time a adds to the two-view
+// bundle adjustment the 3D point error
+//   r_a = s W_a (p_a - m_a)                       [px-equivalent, 3 components]
+// and one with a measurement at time b
+//   r_b = s W_b (p_b - m_b),  p_b = T_a_b^-1 p_a  (frame b)
+// where m is the measured point [m], W its square-root information [1/m] (W^T W = Sigma^-1,
+// Sigma the point's own covariance, see PointSqrtInformation) and s = pixel_sigma_px the pixel
+// noise of the reprojection residuals, so that both kinds of residual are whitened alike and
+// share the robust (Huber) loss. Points without a measurement keep only the stereo
+// reprojection error.
+struct PointMeasurement {
+  bool has_a = false, has_b = false;
+  Eigen::Vector3d m_a = Eigen::Vector3d::Zero();  // [m] frame a
+  Eigen::Vector3d m_b = Eigen::Vector3d::Zero();  // [m] frame b
+  Eigen::Matrix3d W_a = Eigen::Matrix3d::Zero();  // [1/m] square-root information at a
+  Eigen::Matrix3d W_b = Eigen::Matrix3d::Zero();  // [1/m] at b
+};
+struct PointMeasurements {
+  std::vector<PointMeasurement> per_correspondence;  // one per correspondence (or empty)
+  double pixel_sigma_px = 0.5;                       // [px] s above
+};
+// Square-root information of a point m = z ray (ray = (x_n, y_n, 1), the pixel's normalised
+// ray) measured with depth noise sigma_depth_m along the ray and lateral noise
+// sigma_lateral_m across it: Sigma = sigma_lat^2 I + (sigma_depth^2 - sigma_lat^2) e e^T
+// (e = ray / |ray|), W = Sigma^-1/2.
+Eigen::Matrix3d PointSqrtInformation(const Eigen::Vector3d& ray, double sigma_depth_m,
+                                     double sigma_lateral_m);
+
 // Refines T_a_b on the inliers by minimizing the stereo reprojection error (u_left, v, u_right).
 // optimize_points: two-view bundle adjustment over the pose and every point (the pose
 // covariance is the Schur complement of the points), by the analytic solver or, with
@@ -171,11 +200,14 @@ struct RefineResult {
 // refined points in frame a.
 // `offset` (optional, analytic joint solver only): also estimate the disparity offset
 // increment (see OffsetPrior); the pose covariance is conditional on it (calibration-like).
+// `measured` (optional, analytic joint solver only; else the refinement is refused: ok false):
+// add the 3D point errors of PointMeasurement; a measured point starts at m_a.
 RefineResult RefineMotion(const StereoCamera& cam, const std::vector<StereoCorrespondence>& corr,
                           const std::vector<int>& inliers, const Eigen::Isometry3d& T_a_b_initial,
                           const RefineOptions& options,
                           std::vector<Eigen::Vector3d>* points_a = nullptr,
-                          const OffsetPrior* offset = nullptr);
+                          const OffsetPrior* offset = nullptr,
+                          const PointMeasurements* measured = nullptr);
 
 // Adjoint of T for the [rho; phi] ordering: Exp(Ad(T) d) = T Exp(d) T^-1.
 Eigen::Matrix<double, 6, 6> Adjoint(const Eigen::Isometry3d& T);

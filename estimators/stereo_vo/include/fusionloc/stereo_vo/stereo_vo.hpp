@@ -21,6 +21,7 @@
 
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
+#include "fusionloc/stereo_vo/laser_depth.hpp"
 #include "fusionloc/stereo_vo/matching.hpp"
 #include "fusionloc/stereo_vo/motion.hpp"
 
@@ -83,6 +84,11 @@ struct StereoVoOptions {
   int min_quads = 15;                 // fewer closed quadrilaterals: not tracked
   double max_speed_mps = 40.0;        // [m/s] faster estimated motion is rejected as wrong
   double max_gap_s = 1.0;             // [s] longer since the last good frame: new segment
+  // Laser-aided mode (LV-SLAM; laser_depth.hpp, docs/STEREO_VO.md "Laser-aided mode"): features
+  // with a validated laser depth add a 3D point error to the motion refinement. Off: the plain
+  // stereo VO, unchanged.
+  LaserDepthOptions laser_depth;
+  double laser_max_time_offset_s = 0.05;  // [s] a scan farther in time from the images: unused
   template <class A>
   void Serialize(A* a) {
     a->Visit("features", &features);
@@ -109,6 +115,8 @@ struct StereoVoOptions {
     a->Visit("min_quads", &min_quads);
     a->Visit("max_speed_mps", &max_speed_mps);
     a->Visit("max_gap_s", &max_gap_s);
+    a->Visit("laser_depth", &laser_depth);
+    a->Visit("laser_max_time_offset_s", &laser_max_time_offset_s);
   }
   fl::Status Validate() const;
 };
@@ -145,6 +153,19 @@ struct FrameStats {
   // subtracted from every disparity) and its standard deviation [px].
   double disparity_offset_px = 0, disparity_offset_sd_px = 0;
   double ms_total = 0, ms_features = 0, ms_matching = 0, ms_motion = 0;
+  // Laser-aided mode: scan points projected into this frame's image, and over the closed
+  // correspondences the features given a laser depth at the previous / this frame and those
+  // whose laser depth was rejected (discontinuity or disagreement with stereo).
+  int laser_points_in_view = 0;
+  int laser_depth_prev = 0, laser_depth_cur = 0, laser_depth_rejected = 0;
+  double ms_laser = 0;  // [ms] projection and association
+};
+
+// A laser scan for the laser-aided mode: points already in the LEFT camera frame (the caller
+// applies the extrinsic T_camera_laser), taken at `utime`.
+struct LaserCloud {
+  Utime utime = 0;
+  std::vector<Eigen::Vector3f> points;  // [m] left camera optical frame
 };
 
 struct StereoVoResult {
@@ -165,6 +186,9 @@ struct StereoVoResult {
   std::vector<Eigen::Vector3f> keyframe_points;
   std::vector<float> keyframe_intensities;
   FrameStats stats;
+  // Laser-aided mode: "" when the scan was used (or the mode is off), else why this frame runs
+  // on plain stereo (no scan, scan too far in time, too few points in front of the camera).
+  std::string laser_message;
 };
 
 class StereoVo {
@@ -177,7 +201,11 @@ class StereoVo {
 
   // Processes one rectified pair (8-bit gray or 3-channel BGR; converted to gray) taken at
   // `utime`. Never throws on bad images: returns kRejected / kNotTracked with a message.
-  StereoVoResult AddStereoFrame(Utime utime, const cv::Mat& left, const cv::Mat& right);
+  // `laser` (laser-aided mode only; ignored when laser_depth.enabled is false): the scan nearest
+  // in time; nullptr, or an unusable scan, runs the frame on plain stereo (laser_message says
+  // why).
+  StereoVoResult AddStereoFrame(Utime utime, const cv::Mat& left, const cv::Mat& right,
+                                const LaserCloud* laser = nullptr);
 
   const StereoCalibration& calibration() const { return calibration_; }
   const StereoVoOptions& options() const { return options_; }
@@ -192,6 +220,9 @@ class StereoVo {
   StereoVoResult Track(std::unique_ptr<stages::StereoFrame> cur, StereoVoResult result,
                        double t_start);
   void StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* result);
+  // Laser-aided mode: projects the scan into frame->laser if usable, else says why in result.
+  void AttachLaser(const LaserCloud* laser, stages::StereoFrame* frame,
+                   StereoVoResult* result) const;
   void AdvancePose(const stages::Refinement& refined, double dt_s, StereoVoResult* result);
   double PredictedOffsetVariance(Utime utime) const;
   void UpdateOffset(const RefineResult& refined, double predicted_variance, Utime utime,

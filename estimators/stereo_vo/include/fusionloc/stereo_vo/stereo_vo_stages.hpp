@@ -17,11 +17,13 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <memory>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 
 #include "fusionloc/common/time.hpp"
+#include "fusionloc/stereo_vo/laser_depth.hpp"
 #include "fusionloc/stereo_vo/matching.hpp"
 #include "fusionloc/stereo_vo/motion.hpp"
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
@@ -39,6 +41,7 @@ struct StereoFrame {
   std::vector<int> stereo;        // left -> right
   std::vector<int64_t> track_id;  // per left feature with a stereo match, else -1
   int stereo_matches = 0;
+  std::shared_ptr<const LaserDepthMap> laser;  // laser-aided mode: the usable scan, else null
 };
 
 // ---- input checks ----
@@ -151,9 +154,24 @@ struct Refinement {
 // (SelectInliers, RANSAC threshold) between rounds while at least ransac.min_inliers remain.
 // Without use_refinement: the RANSAC motion and inliers, covariance 1e-2 I.
 // offset_prior: estimate the disparity offset increment (nullptr: not).
+// measured: the laser-aided 3D point errors (nullptr: plain reprojection error).
 Refinement RefineStage(const StereoCamera& camera, const std::vector<StereoCorrespondence>& corr,
                        const RansacResult& ransac, const OffsetPrior* offset_prior,
-                       const StereoVoOptions& options);
+                       const StereoVoOptions& options, const PointMeasurements* measured = nullptr);
+
+// ---- laser-aided mode ----
+// The laser depth of each correspondence's feature at a (prev->laser) and at b (cur->laser),
+// validated against its stereo depth, as 3D point measurements (PointMeasurement: m = depth *
+// ray, depth sigma from the association, lateral sigma point_lateral_sigma_px * depth / fx). Counts
+// into *stats (laser_depth_prev, _cur, _rejected).
+struct LaserAssociation {
+  PointMeasurements measured;
+  int prev = 0, cur = 0, rejected = 0;
+};
+LaserAssociation AssociateLaserDepth(const StereoCamera& camera, const StereoFrame& prev,
+                                     const StereoFrame& cur,
+                                     const std::vector<StereoCorrespondence>& corr,
+                                     double pixel_sigma_px, const LaserDepthOptions& options);
 
 // ---- tracks ----
 // Carries prev's track ids over the inlier quads to cur; returns how many of them belong to the
