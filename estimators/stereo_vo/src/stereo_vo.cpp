@@ -253,7 +253,8 @@ StereoVoResult StereoVo::Track(std::unique_ptr<stages::StereoFrame> cur, StereoV
                                         options_.laser_depth);
     result.stats.laser_depth_prev = laser.prev;
     result.stats.laser_depth_cur = laser.cur;
-    result.stats.laser_depth_rejected = laser.rejected;
+    result.stats.laser_depth_inconsistent = laser.inconsistent;
+    result.stats.laser_depth_disagrees = laser.disagrees;
     result.stats.ms_laser += NowMs() - tl;
   }
   const stages::Refinement refined = stages::RefineStage(

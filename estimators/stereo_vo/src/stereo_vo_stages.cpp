@@ -315,9 +315,10 @@ LaserAssociation AssociateLaserDepth(const StereoCamera& camera, const StereoFra
       *m = d.depth_m * ray;
       *W = PointSqrtInformation(ray, d.sigma_m,
                                 options.point_lateral_sigma_px * d.depth_m / camera.fx);
-    } else if (d.verdict == LaserDepthVerdict::kInconsistent ||
-               d.verdict == LaserDepthVerdict::kStereoDisagrees) {
-      ++out.rejected;
+    } else if (d.verdict == LaserDepthVerdict::kInconsistent) {
+      ++out.inconsistent;
+    } else if (d.verdict == LaserDepthVerdict::kStereoDisagrees) {
+      ++out.disagrees;
     }
   };
   for (size_t i = 0; i < corr.size(); ++i) {

@@ -155,9 +155,10 @@ struct FrameStats {
   double ms_total = 0, ms_features = 0, ms_matching = 0, ms_motion = 0;
   // Laser-aided mode: scan points projected into this frame's image, and over the closed
   // correspondences the features given a laser depth at the previous / this frame and those
-  // whose laser depth was rejected (discontinuity or disagreement with stereo).
+  // whose laser depth was rejected (depth discontinuity; disagreement with stereo), both frames.
   int laser_points_in_view = 0;
-  int laser_depth_prev = 0, laser_depth_cur = 0, laser_depth_rejected = 0;
+  int laser_depth_prev = 0, laser_depth_cur = 0;
+  int laser_depth_inconsistent = 0, laser_depth_disagrees = 0;
   double ms_laser = 0;  // [ms] projection and association
 };
 

@@ -163,10 +163,11 @@ Refinement RefineStage(const StereoCamera& camera, const std::vector<StereoCorre
 // The laser depth of each correspondence's feature at a (prev->laser) and at b (cur->laser),
 // validated against its stereo depth, as 3D point measurements (PointMeasurement: m = depth *
 // ray, depth sigma from the association, lateral sigma point_lateral_sigma_px * depth / fx). Counts
-// into *stats (laser_depth_prev, _cur, _rejected).
+// what it gave and rejected.
 struct LaserAssociation {
   PointMeasurements measured;
-  int prev = 0, cur = 0, rejected = 0;
+  int prev = 0, cur = 0;
+  int inconsistent = 0, disagrees = 0;  // rejected: discontinuity / disagreement with stereo
 };
 LaserAssociation AssociateLaserDepth(const StereoCamera& camera, const StereoFrame& prev,
                                      const StereoFrame& cur,
