@@ -244,6 +244,9 @@ RefineResult RefineJoint(const StereoCamera& cam, const std::vector<StereoCorres
 // q = R^T (p_a - t):
 //   d p_b / d rho = -I,  d p_b / d phi = [q]x,  d p_b / d p_a = R^T,  d r_u_right / d c = -g,
 //   d pi / d p = [fx/z 0 -fx x/z^2; 0 fy/z -fy y/z^2; fx/z 0 -fx (x-b)/z^2].
+// With PointMeasurements (laser-aided mode), a measured point adds r_a = s W_a (p_a - m_a) and/or
+// r_b = s W_b (p_b - m_b) (3D point errors, Huber-weighted as one 3-vector each):
+//   d r_a / d p_a = s W_a,  d r_b / d p_a = s W_b R^T,  d r_b / d [rho phi] = s W_b [-I, [q]x].
 // Each iteration eliminates the points (3x3 blocks), solves the 6- or 7-dimensional reduced
 // system, back-substitutes the points, and accepts the step if the robust cost decreased.
 class TwoViewBa {
