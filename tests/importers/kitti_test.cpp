@@ -317,6 +317,26 @@ TEST(KittiBadInputTest, BadTimestampsAndPoses) {
       << msg3;
 }
 
+// An odometry sequence with its poses/NN.txt copied beside the images as poses.txt: that file is
+// the ground truth without --poses; a raw drive's poses.txt is not looked at.
+TEST(KittiOdometryTest, PosesTxtInTheFolderIsTheGroundTruth) {
+  TempDir dir;
+  const std::string root = dir.file("seq");
+  WriteOdometryPairs(root, "image_0", "image_1", 2, cv::Mat(6, 10, CV_8UC1, cv::Scalar(90)));
+  fl::test::WriteText(root + "/times.txt", "0.0\n0.1\n");
+  fl::test::WriteText(root + "/calib.txt",
+                      "P0: 50 0 5 0 0 50 3 0 0 0 1 0\nP1: 50 0 5 -25 0 50 3 0 0 0 1 0\n");
+  KittiOptions opts;
+  const std::string message = ExpectConvertError(opts, root, dir.file("o.lcmlog"));
+  EXPECT_NE(message.find("no ground truth"), std::string::npos) << message;
+  fl::test::WriteText(root + "/poses.txt",
+                      "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0.5 0 1 0 0 0 0 1 0\n");
+  const KittiSequence seq = ScanKittiFolder(opts, root);
+  EXPECT_EQ(seq.poses_path, root + "/poses.txt");
+  ASSERT_EQ(seq.T_cam0start_cam0.size(), 2u);
+  EXPECT_NEAR(seq.T_cam0start_cam0[1].translation().x(), 0.5, 1e-12);
+}
+
 // Real files in the wild (docs/RELIABILITY.md): a folder whose images were trimmed but whose
 // times.txt (and pose file) were not. The first N entries are used, with a warning.
 TEST(KittiWildFilesTest, TimesLongerThanTheFramesUseTheFirstN) {

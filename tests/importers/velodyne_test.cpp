@@ -9,7 +9,11 @@
 #include <opencv2/imgcodecs.hpp>
 #include <vector>
 
+#include "bot_core/rigid_transform_t.hpp"
+#include "fusionloc/common/channels.hpp"
+#include "fusionloc/common/geometry.hpp"
 #include "fusionloc/importers/kitti.hpp"
+#include "fusionloc/laser_scan_3d_t.hpp"
 #include "importer_fixtures.hpp"
 #include "test_paths.hpp"
 
@@ -144,6 +148,46 @@ TEST(KittiVelodyneBadInputTest, FolderWithScansButNoTrOrTooFewScans) {
   const std::string few = OdometryFolder(b, 3, 2, kCalibWithTr);
   const std::string e2 = ErrorOf([&] { ScanKittiFolder(opts, few); });
   EXPECT_NE(e2.find("2 .bin scans for 3 images"), std::string::npos) << e2;
+}
+
+TEST(KittiVelodyneTest, ConversionWritesLaser3dAndItsMounting) {
+  TempDir dir;
+  const std::string root = OdometryFolder(dir, 3, 3, kCalibWithTr);
+  // Frame 1's scan: two points and a NaN one.
+  WriteFloats(root + "/velodyne/000001.bin",
+              {5.f, 1.f, -1.5f, 0.25f, std::numeric_limits<float>::quiet_NaN(), 0.f, 0.f, 0.f, -2.f,
+               3.f, 0.5f, 0.75f});
+  KittiOptions opts;
+  opts.allow_no_ground_truth = true;
+  const ConvertSummary s = ConvertKitti(opts, root, dir.file("o.lcmlog"));
+  EXPECT_EQ(s.messages.at(channels::kLaser3d), 3);
+  const auto log = fl::test::ReadLog(dir.file("o.lcmlog"));
+  const auto scan = log.Decode<fusionloc::laser_scan_3d_t>(channels::kLaser3d, 1);
+  EXPECT_EQ(scan.frame, "velodyne");
+  EXPECT_EQ(scan.utime, kKittiOdometryEpochUtime + 100000);
+  ASSERT_EQ(scan.num_points, 2);
+  EXPECT_FLOAT_EQ(scan.x[0], 5.f);
+  EXPECT_FLOAT_EQ(scan.y[0], 1.f);
+  EXPECT_FLOAT_EQ(scan.z[0], -1.5f);
+  EXPECT_FLOAT_EQ(scan.intensity[0], 0.25f);
+  EXPECT_FLOAT_EQ(scan.x[1], -2.f);
+  EXPECT_FLOAT_EQ(scan.intensity[1], 0.75f);
+  bool warned = false;
+  for (const auto& w : s.warnings)
+    warned |= w.find("1 non-finite points dropped") != std::string::npos;
+  EXPECT_TRUE(warned);
+  // The fixture's Tr turns Velodyne axes (x forward, y left, z up) into the optical frame, and
+  // the base has the same axes as the Velodyne: T_base_velodyne = identity.
+  ASSERT_GE(log.IndexOf(channels::kLaser3dToBase, 0), 0);
+  const auto m = log.Decode<bot_core::rigid_transform_t>(channels::kLaser3dToBase, 0);
+  const Eigen::Isometry3d T = IsometryFromArrays(m.trans, m.quat);
+  EXPECT_TRUE(T.isApprox(Eigen::Isometry3d::Identity(), 1e-12));
+
+  // Without laser_3d: no LASER_3D.
+  opts.laser_3d = false;
+  const ConvertSummary none = ConvertKitti(opts, root, dir.file("n.lcmlog"));
+  EXPECT_EQ(none.messages.count(channels::kLaser3d), 0u);
+  EXPECT_EQ(none.messages.count(channels::kLaser3dToBase), 0u);
 }
 
 TEST(KittiVelodyneTest, RealSnippetHasScansInFrontOfTheCamera) {

@@ -106,6 +106,7 @@ struct RunOutput {
 // The converter's options for a folder: an odometry sequence's own poses.txt as ground truth.
 fl::importers::KittiOptions KittiOptionsFor(const std::string& folder) {
   fl::importers::KittiOptions kopts;
+  kopts.laser_3d = false;  // the laser-aided run reads the scans from the folder itself
   if (!fs::exists(folder + "/image_00") && fs::exists(folder + "/poses.txt")) {
     kopts.poses_file = folder + "/poses.txt";
   }

@@ -18,7 +18,7 @@ int main(int argc, char** argv) {
   fl::CommandLine& cli = program.cli();
   std::string folder, out, poses, cameras;
   int start = -1, max_frames = 0;
-  bool no_gt = false;
+  bool no_gt = false, no_laser_3d = false;
   fl::importers::KittiOptions options;
   program.AddOptions(&options, "a KittiOptions file, see docs/IMPORTERS.md");
   cli.AddPositional("FOLDER", &folder, "KITTI folder", /*required=*/false);
@@ -31,6 +31,8 @@ int main(int argc, char** argv) {
   cli.AddFlag("start", &start, "first frame (overrides the config; -1 = config)");
   cli.AddFlag("max-frames", &max_frames, "at most this many frames (overrides; 0 = config)");
   cli.AddFlag("cameras", &cameras, "odometry sequences: auto, gray (image_0/1) or color (2/3)");
+  cli.AddFlag("no-laser-3d", &no_laser_3d,
+              "do not write the Velodyne scans (LASER_3D, about 2 MB a frame) even if present");
   cli.AddEpilog(
       "\nExample:\n"
       "  fl-kitti2lcm ../shared/data/stereo/kitti_raw_2011_09_26_drive_0001 kitti0001.lcmlog\n"
@@ -42,6 +44,7 @@ int main(int argc, char** argv) {
     if (start >= 0) options.start_frame = start;
     if (max_frames != 0) options.max_frames = max_frames;
     if (!cameras.empty()) options.cameras = cameras;
+    if (no_laser_3d) options.laser_3d = false;
     const fl::Status valid = options.Validate();
     return valid.ok() ? "" : "invalid options: " + valid.message();
   });

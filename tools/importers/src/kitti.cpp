@@ -22,6 +22,7 @@
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/laser_scan_3d_t.hpp"
 #include "fusionloc/stereo_calibration_t.hpp"
 
 namespace fl::importers {
@@ -607,6 +608,11 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
   if (ppath.empty() && IsFile(Join(folder, "poses_cam0_from_oxts.txt"))) {
     ppath = Join(folder, "poses_cam0_from_oxts.txt");
   }
+  // An odometry sequence copied with its poses/NN.txt beside the images (as the shared
+  // lidar_stereo snippet is): the folder's own poses.txt.
+  if (ppath.empty() && !raw && IsFile(Join(folder, "poses.txt"))) {
+    ppath = Join(folder, "poses.txt");
+  }
   if (!ppath.empty()) {
     if (!IsFile(ppath)) Fail(ppath + ": pose file missing (check --poses)");
     seq.T_cam0start_cam0 = ParseKittiPoses(ReadText(ppath), ppath);
@@ -633,7 +639,7 @@ KittiSequence ScanKittiFolder(const KittiOptions& options, const std::string& fo
     seq.poses_path = Join(folder, "oxts");
   } else if (!options.allow_no_ground_truth) {
     Fail(folder +
-         ": no ground truth: neither poses_cam0_from_oxts.txt nor oxts/ here; give "
+         ": no ground truth: neither poses_cam0_from_oxts.txt, poses.txt nor oxts/ here; give "
          "--poses FILE (12 numbers a line, e.g. KITTI odometry poses/NN.txt) or "
          "--no-ground-truth");
   }
@@ -701,6 +707,16 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
     IsometryToArrays(T_base_camera, camera_to_base.trans, camera_to_base.quat);
   }
 
+  // The Velodyne's mounting: base = cam0 with base axes, so T_base_velo = [R_bc | 0] * Tr.
+  const bool laser_3d = options.laser_3d && !seq.velodyne_scans.empty();
+  bot_core::rigid_transform_t laser_3d_to_base{};
+  {
+    Eigen::Isometry3d T_base_cam0 = Eigen::Isometry3d::Identity();
+    T_base_cam0.linear() = R_bc;
+    IsometryToArrays(T_base_cam0 * seq.T_cam0_velo, laser_3d_to_base.trans,
+                     laser_3d_to_base.quat);
+  }
+
   int64_t backwards = 0;
   for (size_t i = begin + 1; i < end; ++i) {
     if (seq.utimes[i] <= seq.utimes[i - 1]) ++backwards;
@@ -736,6 +752,10 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
         cal.utime = t;
         camera_to_base.utime = t;
         write(channels::kCameraToBase, camera_to_base, t);
+        if (laser_3d) {
+          laser_3d_to_base.utime = t;
+          write(channels::kLaser3dToBase, laser_3d_to_base, t);
+        }
         write(channels::kStereoCalibration, cal, t);
         last_cal = t;
         cal_written = true;
@@ -747,6 +767,28 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
       pair.image_types = {kLeft, kRight};
       pair.images = {MakeImage(left, t), MakeImage(right, t)};
       write(channels::kStereo, pair, t);
+      if (laser_3d) {
+        const VelodyneScan v = ReadVelodyneBin(seq.velodyne_scans[i]);
+        if (v.dropped_non_finite > 0) {
+          summary.warnings.push_back(seq.velodyne_scans[i] + ": " +
+                                     std::to_string(v.dropped_non_finite) +
+                                     " non-finite points dropped");
+        }
+        fusionloc::laser_scan_3d_t scan;
+        scan.utime = t;
+        scan.frame = "velodyne";
+        scan.num_points = static_cast<int32_t>(v.points.size());
+        scan.x.resize(v.points.size());
+        scan.y.resize(v.points.size());
+        scan.z.resize(v.points.size());
+        scan.intensity = v.intensities;
+        for (size_t k = 0; k < v.points.size(); ++k) {
+          scan.x[k] = v.points[k].x();
+          scan.y[k] = v.points[k].y();
+          scan.z[k] = v.points[k].z();
+        }
+        write(channels::kLaser3d, scan, t);
+      }
       if (!seq.T_cam0start_cam0.empty()) {
         Eigen::Isometry3d T_c0_ci = T_cam0_start_inv * seq.T_cam0start_cam0[i];
         Eigen::Isometry3d T_world_base = Eigen::Isometry3d::Identity();

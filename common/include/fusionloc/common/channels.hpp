@@ -10,12 +10,14 @@ constexpr const char* kOdometry = "ODOMETRY";                     // fusionloc.w
 constexpr const char* kBaseCommand = "BASE_COMMAND";              // fusionloc.base_command_t
 constexpr const char* kStereo = "STEREO";                         // bot_core.images_t (LEFT, RIGHT)
 constexpr const char* kStereoCalibration = "STEREO_CALIBRATION";  // fusionloc.stereo_calibration_t
+constexpr const char* kLaser3d = "LASER_3D";  // fusionloc.laser_scan_3d_t (multi-line scanner)
 // The robot description (config/robot/<robot>.yaml, docs/ROBOT.md): sensor mountings as
 // bot_core.rigid_transform_t T_base_sensor (p_base = R p_sensor + t), published by whatever
 // describes the robot (fl-sim, the importers, fl-robot-description) first and every 1 s.
 // libbot2's naming: <FROM>_TO_<TO>.
 constexpr const char* kLaserToBase = "LASER_TO_BASE";    // T_base_laser
 constexpr const char* kCameraToBase = "CAMERA_TO_BASE";  // T_base_camera (left, optical frame)
+constexpr const char* kLaser3dToBase = "LASER_3D_TO_BASE";  // T_base_laser3d (LASER_3D's frame)
 // Reference pose of the base in the world frame (simulator truth, KITTI OXTS poses, CARMEN
 // corrected poses): bot_core.pose_t. Never read by an estimator.
 constexpr const char* kGroundTruth = "GROUND_TRUTH";

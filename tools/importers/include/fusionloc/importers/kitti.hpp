@@ -20,6 +20,11 @@
 //                       calibration_period_s (so a late subscriber gets it).
 //   STEREO              bot_core.images_t: LEFT (0) then RIGHT (1), 8-bit GRAY, row_stride =
 //                       width, utime = the left image's time stamp.
+//   LASER_3D_TO_BASE    bot_core.rigid_transform_t T_base_velodyne (T_base_cam0 * Tr), with
+//                       CAMERA_TO_BASE, when the folder has Velodyne scans (and laser_3d).
+//   LASER_3D            fusionloc.laser_scan_3d_t per frame, frame "velodyne", the scan's
+//                       finite points in the Velodyne frame, utime = the frame's (KITTI
+//                       triggers the cameras when the scanner faces forward).
 //   GROUND_TRUTH        bot_core.pose_t per frame: T_world_base with world = the base frame
 //                       at the first converted frame, T_world_base = R_bc * T_c0_ci * R_bc^-1
 //                       (R_bc: optical camera frame -> base frame; see kRotationBaseCamera).
@@ -51,6 +56,8 @@ struct KittiOptions {
   // (image_0/1) or "color" (image_2/3).
   std::string cameras = "auto";
   double calibration_period_s = 1.0;  // [s] republish STEREO_CALIBRATION (0 = only once)
+  // Velodyne scans (velodyne/ or velodyne_points/data/) as LASER_3D when the folder has them.
+  bool laser_3d = true;
 
   template <class A>
   void Serialize(A* a) {
@@ -60,6 +67,7 @@ struct KittiOptions {
     a->Visit("allow_no_ground_truth", &allow_no_ground_truth);
     a->Visit("cameras", &cameras);
     a->Visit("calibration_period_s", &calibration_period_s);
+    a->Visit("laser_3d", &laser_3d);
   }
   Status Validate() const;
 };
