@@ -176,6 +176,13 @@ TEST(KittiVelodyneTest, ConversionWritesLaser3dAndItsMounting) {
   for (const auto& w : s.warnings)
     warned |= w.find("1 non-finite points dropped") != std::string::npos;
   EXPECT_TRUE(warned);
+  // Each scan comes just before its frame's images (a subscriber has it for the frame).
+  for (size_t k = 0; k < 3; ++k) {
+    EXPECT_LT(log.IndexOf(channels::kLaser3d, k), log.IndexOf(channels::kStereo, k)) << k;
+    if (k > 0) {
+      EXPECT_GT(log.IndexOf(channels::kLaser3d, k), log.IndexOf(channels::kStereo, k - 1)) << k;
+    }
+  }
   // The fixture's Tr turns Velodyne axes (x forward, y left, z up) into the optical frame, and
   // the base has the same axes as the Velodyne: T_base_velodyne = identity.
   ASSERT_GE(log.IndexOf(channels::kLaser3dToBase, 0), 0);

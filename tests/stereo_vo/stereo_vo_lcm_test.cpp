@@ -6,11 +6,13 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <map>
 
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/status_t.hpp"
 #include "stereo_fixtures.hpp"
 #include "test_paths.hpp"
@@ -120,8 +122,7 @@ TEST(StereoVoLcm, FactorAndCalibrationConversions) {
   EXPECT_TRUE(back.T_base_camera.isApprox(c.T_base_camera, 1e-12));
   EXPECT_EQ(back.width, c.width);
   EXPECT_TRUE(back.Validate().ok());
-  EXPECT_FALSE(
-      CalibrationFromLcm(MakeCalibration(c, false), MakeCameraToBase(c)).Validate().ok());
+  EXPECT_FALSE(CalibrationFromLcm(MakeCalibration(c, false), MakeCameraToBase(c)).Validate().ok());
 }
 
 // Replays a log through the real process: a frame before the mounting (CAMERA_TO_BASE) waits,
@@ -206,6 +207,119 @@ TEST(StereoVoLcm, ProcessReplaysALog) {
   }
   EXPECT_EQ(duplicates, 1);
   EXPECT_TRUE(saw_rectified_error) << "status should report the unrectified calibration";
+}
+
+// LASER_3D converted to the left camera frame through both mountings: a point on the optical
+// axis 5 m ahead, and a NaN point left out and counted.
+TEST(StereoVoLcm, LaserScanToCameraAppliesTheMountings) {
+  const StereoCalibration calib = fl::test::stereo::TestCalibration();
+  Eigen::Isometry3d T_base_laser = Eigen::Isometry3d::Identity();
+  T_base_laser.translation() = Eigen::Vector3d(0.1, 0.0, 0.3);
+  // 5 m ahead of the camera along its optical axis, in the laser frame.
+  const Eigen::Vector3d p_camera(0, 0, 5);
+  const Eigen::Vector3d p_laser = T_base_laser.inverse() * calib.T_base_camera * p_camera;
+  fusionloc::laser_scan_3d_t scan{};
+  scan.utime = 7;
+  scan.num_points = 2;
+  scan.x = {static_cast<float>(p_laser.x()), std::numeric_limits<float>::quiet_NaN()};
+  scan.y = {static_cast<float>(p_laser.y()), 0.f};
+  scan.z = {static_cast<float>(p_laser.z()), 0.f};
+  scan.intensity = {0.5f, 0.5f};
+  int64_t non_finite = 0;
+  const LaserCloud cloud =
+      LaserScanToCamera(scan, calib.T_base_camera.inverse() * T_base_laser, &non_finite);
+  EXPECT_EQ(cloud.utime, 7);
+  ASSERT_EQ(cloud.points.size(), 1u);
+  EXPECT_EQ(non_finite, 1);
+  EXPECT_LT((cloud.points[0].cast<double>() - p_camera).norm(), 1e-5);
+}
+
+// fl-stereo-vo --laser-aided replaying a log: with LASER_3D and its mounting the frames use the
+// scans (status laser_frames, laser_depth_features); without the mounting, or without the
+// flag, the same frames run on plain stereo and are all tracked.
+TEST(StereoVoLcm, ProcessLaserAidedModeUsesTheScansAndFallsBack) {
+  const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
+  if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
+  fl::test::TempDir dir;
+  const StereoCalibration calib = fl::test::stereo::TestCalibration();
+  const cv::Mat tex = fl::test::stereo::Texture(900, 700, 5);
+  Eigen::Isometry3d T_base_laser = Eigen::Isometry3d::Identity();
+  T_base_laser.translation() = Eigen::Vector3d(0.1, 0.0, 0.3);
+  const Eigen::Isometry3d T_laser_camera = T_base_laser.inverse() * calib.T_base_camera;
+  constexpr double kDepth = 5.0;
+  auto write_log = [&](const std::string& path, bool with_mounting) {
+    fl::LcmLogWriter log(path);
+    const Utime t0 = 2000000000;
+    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0 - 3);
+    log.Write(fl::channels::kCameraToBase, MakeCameraToBase(calib), t0 - 2);
+    if (with_mounting) {
+      log.Write(fl::channels::kLaser3dToBase, fl::TransformToLcm(T_base_laser, t0 - 1), t0 - 1);
+    }
+    // The plane at kDepth fills the view; the camera slides along it, so every frame's scan of
+    // it is the same in the camera frame: scan lines every 4 px, a point every 2 px.
+    fusionloc::laser_scan_3d_t scan{};
+    for (double v = 0.5; v < calib.height; v += 4.0) {
+      for (double u = 0.5; u < calib.width; u += 2.0) {
+        const Eigen::Vector3d p =
+            T_laser_camera * Eigen::Vector3d((u - calib.cx) * kDepth / calib.fx,
+                                             (v - calib.cy) * kDepth / calib.fy, kDepth);
+        scan.x.push_back(static_cast<float>(p.x()));
+        scan.y.push_back(static_cast<float>(p.y()));
+        scan.z.push_back(static_cast<float>(p.z()));
+        scan.intensity.push_back(0.5f);
+      }
+    }
+    scan.num_points = static_cast<int32_t>(scan.x.size());
+    scan.frame = "laser";
+    cv::Mat l, r;
+    for (int k = 0; k < 12; ++k) {
+      fl::test::stereo::PlanePair(tex, calib, kDepth, 0.05 * k, 0.0, &l, &r);
+      const Utime t = t0 + 100000 * k;
+      scan.utime = t - 2000;  // 2 ms before the images
+      log.Write(fl::channels::kLaser3d, scan, t - 2000);
+      log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);
+    }
+    log.Close();
+  };
+  auto run = [&](const std::string& in, const std::string& out, const std::string& flags) {
+    const std::string cmd = bin + " " + flags + " --lcm-url log:" + in + "," + out +
+                            " --log-level error > " + dir.file("stdout.txt") + " 2>&1";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    fl::LcmLogReader reader(out);
+    fl::LcmLogEvent ev;
+    std::map<std::string, double> values;
+    int poses = 0;
+    while (reader.Next(&ev)) {
+      if (ev.channel == fl::channels::kVoPose) ++poses;
+      if (ev.channel != "STATUS_FL_STEREO_VO") continue;
+      fusionloc::status_t st;
+      const int size = static_cast<int>(ev.data.size());
+      EXPECT_EQ(st.decode(ev.data.data(), 0, size), size);
+      for (int k = 0; k < st.num_keys; ++k) {
+        values[st.keys[static_cast<size_t>(k)]] = st.values[static_cast<size_t>(k)];
+      }
+    }
+    values["poses"] = poses;
+    return values;
+  };
+  write_log(dir.file("with.lcmlog"), true);
+  write_log(dir.file("without.lcmlog"), false);
+
+  auto v = run(dir.file("with.lcmlog"), dir.file("o1.lcmlog"), "--laser-aided");
+  EXPECT_EQ(v["poses"], 12);
+  EXPECT_EQ(v["laser_scans"], 12);
+  EXPECT_EQ(v["laser_frames"], 12);
+  EXPECT_EQ(v["laser_fallback_frames"], 0);
+  EXPECT_GT(v["laser_depth_features"], 20);
+
+  v = run(dir.file("without.lcmlog"), dir.file("o2.lcmlog"), "--laser-aided");
+  EXPECT_EQ(v["poses"], 12);  // plain stereo, every frame tracked
+  EXPECT_EQ(v["laser_frames"], 0);
+  EXPECT_EQ(v["laser_fallback_frames"], 12);
+
+  v = run(dir.file("with.lcmlog"), dir.file("o3.lcmlog"), "");
+  EXPECT_EQ(v["poses"], 12);
+  EXPECT_EQ(v.count("laser_frames"), 0u);  // mode off: scans not even read
 }
 
 }  // namespace

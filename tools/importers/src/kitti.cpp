@@ -760,13 +760,8 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
         last_cal = t;
         cal_written = true;
       }
-      const cv::Mat left = ReadGray(seq.left_images[i], c.width, c.height);
-      const cv::Mat right = ReadGray(seq.right_images[i], c.width, c.height);
-      pair.utime = t;
-      pair.n_images = 2;
-      pair.image_types = {kLeft, kRight};
-      pair.images = {MakeImage(left, t), MakeImage(right, t)};
-      write(channels::kStereo, pair, t);
+      // The scan before its images: a subscriber (fl-stereo-vo --laser-aided) has it when the
+      // frame arrives.
       if (laser_3d) {
         const VelodyneScan v = ReadVelodyneBin(seq.velodyne_scans[i]);
         if (v.dropped_non_finite > 0) {
@@ -789,6 +784,13 @@ ConvertSummary ConvertKitti(const KittiOptions& options, const std::string& fold
         }
         write(channels::kLaser3d, scan, t);
       }
+      const cv::Mat left = ReadGray(seq.left_images[i], c.width, c.height);
+      const cv::Mat right = ReadGray(seq.right_images[i], c.width, c.height);
+      pair.utime = t;
+      pair.n_images = 2;
+      pair.image_types = {kLeft, kRight};
+      pair.images = {MakeImage(left, t), MakeImage(right, t)};
+      write(channels::kStereo, pair, t);
       if (!seq.T_cam0start_cam0.empty()) {
         Eigen::Isometry3d T_c0_ci = T_cam0_start_inv * seq.T_cam0start_cam0[i];
         Eigen::Isometry3d T_world_base = Eigen::Isometry3d::Identity();

@@ -1,12 +1,14 @@
 #include "fusionloc/stereo_vo/stereo_vo_lcm.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <opencv2/imgproc.hpp>
 
-#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/status_t.hpp"
 
 namespace fl::vo {
@@ -124,6 +126,26 @@ fusionloc::point_cloud_t KeyframePointsToLcm(const StereoVoResult& result) {
   return m;
 }
 
+LaserCloud LaserScanToCamera(const fusionloc::laser_scan_3d_t& scan,
+                             const Eigen::Isometry3d& T_camera_laser, int64_t* non_finite) {
+  LaserCloud cloud;
+  cloud.utime = scan.utime;
+  const size_t n = std::min({static_cast<size_t>(std::max(scan.num_points, 0)), scan.x.size(),
+                             scan.y.size(), scan.z.size()});
+  cloud.points.reserve(n);
+  const Eigen::Matrix3f R = T_camera_laser.linear().cast<float>();
+  const Eigen::Vector3f t = T_camera_laser.translation().cast<float>();
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f p(scan.x[i], scan.y[i], scan.z[i]);
+    if (!p.allFinite()) {
+      if (non_finite) ++*non_finite;
+      continue;
+    }
+    cloud.points.push_back(R * p + t);
+  }
+  return cloud;
+}
+
 bool SameCalibration(const StereoCalibration& a, const StereoCalibration& b) {
   auto close = [](double x, double y) { return std::abs(x - y) <= 1e-9 * (1 + std::abs(x)); };
   return a.width == b.width && a.height == b.height && close(a.fx, b.fx) && close(a.fy, b.fy) &&
@@ -137,7 +159,12 @@ std::vector<ChannelSpec> StereoVoNode::Inputs() {
           {channels::kStereoCalibration, "fusionloc.stereo_calibration_t",
            "intrinsics and baseline (required before the first frame)"},
           {channels::kCameraToBase, "bot_core.rigid_transform_t",
-           "T_base_camera, the robot description's mounting (required before the first frame)"}};
+           "T_base_camera, the robot description's mounting (required before the first frame)"},
+          {channels::kLaser3d, "fusionloc.laser_scan_3d_t",
+           "laser-aided mode (laser_depth.enabled, --laser-aided): multi-line scans; the one "
+           "nearest each frame in time, received before it, gives features their depth"},
+          {channels::kLaser3dToBase, "bot_core.rigid_transform_t",
+           "laser-aided mode: T_base_laser3d, the scanner's mounting (without it: plain stereo)"}};
 }
 
 std::vector<ChannelSpec> StereoVoNode::Outputs() {
@@ -157,6 +184,8 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
       ch_pose_(channels(channels::kVoPose)),
       ch_factors_(channels(channels::kVoFactors)),
       ch_points_(channels(channels::kVoPoints)),
+      ch_laser_(channels(channels::kLaser3d)),
+      ch_laser_to_base_(channels(channels::kLaser3dToBase)),
       status_(lcm, kProgram) {
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_calib_);
   lcm_->Subscribe<fusionloc::stereo_calibration_t>(
@@ -168,6 +197,72 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
   lcm_->Subscribe<bot_core::images_t>(
       ch_stereo_, [this](const bot_core::images_t& m, const std::string&) { OnStereo(m); },
       LcmInterface::Duplicates::kDrop);
+  if (options_.laser_depth.enabled) {
+    lcm_->Subscribe<fusionloc::laser_scan_3d_t>(
+        ch_laser_,
+        [this](const fusionloc::laser_scan_3d_t& m, const std::string&) { OnLaserScan(m); },
+        LcmInterface::Duplicates::kDrop);
+    lcm_->Subscribe<bot_core::rigid_transform_t>(
+        ch_laser_to_base_,
+        [this](const bot_core::rigid_transform_t& m, const std::string&) { OnLaserToBase(m); });
+  }
+}
+
+void StereoVoNode::OnLaserScan(const fusionloc::laser_scan_3d_t& msg) {
+  status_.CountIn(ch_laser_, msg.utime);
+  if (msg.utime <= 0) {
+    status_.CountDropped(ch_laser_ + ": utime " + std::to_string(msg.utime) +
+                         " is not a time stamp (microseconds since 1970)");
+    return;
+  }
+  if (!laser_scans_.empty() && msg.utime <= laser_scans_.front().utime) {
+    status_.CountDropped(ch_laser_ + ": scan at " + std::to_string(msg.utime) +
+                         " not after the previous one (" +
+                         std::to_string(laser_scans_.front().utime) + "); dropped");
+    return;
+  }
+  ++laser_scans_in_;
+  laser_scans_.push_front(msg);
+  if (laser_scans_.size() > kLaserScansKept) laser_scans_.pop_back();
+}
+
+void StereoVoNode::OnLaserToBase(const bot_core::rigid_transform_t& msg) {
+  status_.CountIn();
+  const Eigen::Isometry3d T = fl::TransformFromLcm(msg);
+  const double qn = std::sqrt(msg.quat[0] * msg.quat[0] + msg.quat[1] * msg.quat[1] +
+                              msg.quat[2] * msg.quat[2] + msg.quat[3] * msg.quat[3]);
+  constexpr double kMaxMountOffsetM = 10.0;
+  if (!T.matrix().allFinite() || !(std::abs(qn - 1.0) < 1e-3) ||
+      !(T.translation().norm() <= kMaxMountOffsetM)) {
+    status_.CountDropped(ch_laser_to_base_ +
+                         ": T_base_laser3d is not a rigid transform (quaternion norm " +
+                         std::to_string(qn) + ") or more than 10 m away; ignored");
+    return;
+  }
+  if (T_base_laser_ && !T_base_laser_->isApprox(T, 1e-9)) {
+    FL_LOG(WARN) << ch_laser_to_base_ << " changed: the new mounting is used from now on";
+  }
+  T_base_laser_ = T;
+}
+
+const LaserCloud* StereoVoNode::LaserFor(Utime utime, std::string* why) {
+  if (laser_scans_.empty()) {
+    *why = "no " + ch_laser_ + " scan received yet";
+    return nullptr;
+  }
+  if (!T_base_laser_) {
+    *why = ch_laser_ + " without its mounting " + ch_laser_to_base_ +
+           " (the robot description's T_base_laser3d)";
+    return nullptr;
+  }
+  const fusionloc::laser_scan_3d_t* best = &laser_scans_.front();
+  for (const auto& s : laser_scans_) {
+    if (std::llabs(s.utime - utime) < std::llabs(best->utime - utime)) best = &s;
+  }
+  const Eigen::Isometry3d T_camera_laser =
+      active_calibration_.T_base_camera.inverse() * *T_base_laser_;
+  laser_cloud_ = LaserScanToCamera(*best, T_camera_laser, &laser_points_non_finite_);
+  return &laser_cloud_;
 }
 
 StereoVoNode::~StereoVoNode() = default;
@@ -219,8 +314,23 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
     status_.CountDropped(ch_stereo_ + ": " + s.message());
     return;
   }
-  const StereoVoResult r = vo_->AddStereoFrame(msg.utime, left, right);
+  const LaserCloud* laser = nullptr;
+  std::string laser_why;
+  if (options_.laser_depth.enabled) laser = LaserFor(msg.utime, &laser_why);
+  const StereoVoResult r = vo_->AddStereoFrame(msg.utime, left, right, laser);
   ++frames_;
+  if (options_.laser_depth.enabled) {
+    const bool used = r.laser_message.empty() && r.stats.laser_points_in_view > 0;
+    ++(used ? laser_frames_ : laser_fallback_frames_);
+    if (!used && (r.state == TrackingState::kInitialized || r.state == TrackingState::kTracked)) {
+      // Not an error of the frame: the VO ran it on plain stereo; say why once in a while.
+      const std::string why = laser_why.empty() ? r.laser_message : laser_why;
+      if (laser_fallback_frames_ == 1 || laser_fallback_frames_ % 100 == 0) {
+        FL_LOG(WARN) << "frame " << msg.utime << ": laser-aided mode: " << why << " (plain stereo; "
+                     << laser_fallback_frames_ << " such frames)";
+      }
+    }
+  }
   status_.AddItemTime(r.stats.ms_total);
   const Utime stamp = lcm_->last_message_utime();
   switch (r.state) {
@@ -261,12 +371,23 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
   // stereo calibration is off.
   status_.Set("disparity_offset_px", r.stats.disparity_offset_px);
   status_.Set("disparity_offset_sd_px", r.stats.disparity_offset_sd_px);
+  if (options_.laser_depth.enabled) {
+    status_.Set("laser_scans", static_cast<double>(laser_scans_in_));
+    status_.Set("laser_frames", static_cast<double>(laser_frames_));
+    status_.Set("laser_fallback_frames", static_cast<double>(laser_fallback_frames_));
+    status_.Set("laser_points_non_finite", static_cast<double>(laser_points_non_finite_));
+    status_.Set("laser_depth_features", r.stats.laser_depth_cur);
+  }
 }
 
 std::string StereoVoNode::Summary() const {
   return "frames " + std::to_string(frames_) + ", tracked " + std::to_string(tracked_) +
          ", not tracked " + std::to_string(not_tracked_) + ", keyframes " +
-         std::to_string(keyframes_) + ", dropped " + std::to_string(status_.dropped());
+         std::to_string(keyframes_) + ", dropped " + std::to_string(status_.dropped()) +
+         (options_.laser_depth.enabled
+              ? ", laser-aided " + std::to_string(laser_frames_) + " (plain stereo " +
+                    std::to_string(laser_fallback_frames_) + ")"
+              : "");
 }
 
 }  // namespace fl::vo

@@ -22,9 +22,10 @@
 //                       width, utime = the left image's time stamp.
 //   LASER_3D_TO_BASE    bot_core.rigid_transform_t T_base_velodyne (T_base_cam0 * Tr), with
 //                       CAMERA_TO_BASE, when the folder has Velodyne scans (and laser_3d).
-//   LASER_3D            fusionloc.laser_scan_3d_t per frame, frame "velodyne", the scan's
-//                       finite points in the Velodyne frame, utime = the frame's (KITTI
-//                       triggers the cameras when the scanner faces forward).
+//   LASER_3D            fusionloc.laser_scan_3d_t per frame, just before its STEREO, frame
+//                       "velodyne", the scan's finite points in the Velodyne frame, utime =
+//                       the frame's (KITTI triggers the cameras when the scanner faces
+//                       forward).
 //   GROUND_TRUTH        bot_core.pose_t per frame: T_world_base with world = the base frame
 //                       at the first converted frame, T_world_base = R_bc * T_c0_ci * R_bc^-1
 //                       (R_bc: optical camera frame -> base frame; see kRotationBaseCamera).

@@ -1,12 +1,15 @@
 // The stereo VO's LCM adapter (target fl_stereo_vo_lcm; the core library has no LCM):
 // conversions between the library and LCM messages, shared with the benchmarks, and
 // StereoVoNode, which fl-stereo-vo and fl-replay run.
-//   in:  STEREO (bot_core.images_t LEFT/RIGHT, GRAY/RGB/BGR), STEREO_CALIBRATION
+//   in:  STEREO (bot_core.images_t LEFT/RIGHT, GRAY/RGB/BGR), STEREO_CALIBRATION,
+//        CAMERA_TO_BASE; laser-aided mode (laser_depth.enabled): LASER_3D and its mounting
+//        LASER_3D_TO_BASE
 //   out: VO_POSE (bot_core.pose_t, T_world_base), VO_FACTORS (relative_pose_factor_t between
 //        keyframes, base frame, SOURCE_VISION), VO_POINTS (point_cloud_t per keyframe, frame
 //        "camera"), STATUS_FL_STEREO_VO (status_t).
 #pragma once
 
+#include <deque>
 #include <memory>
 #include <optional>
 #include <opencv2/core.hpp>
@@ -18,6 +21,7 @@
 #include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/common/status.hpp"
+#include "fusionloc/laser_scan_3d_t.hpp"
 #include "fusionloc/point_cloud_t.hpp"
 #include "fusionloc/relative_pose_factor_t.hpp"
 #include "fusionloc/stereo_calibration_t.hpp"
@@ -40,6 +44,11 @@ StereoCalibration CalibrationFromLcm(const fusionloc::stereo_calibration_t& msg,
 bot_core::pose_t PoseToLcm(Utime utime, const Eigen::Isometry3d& T_world_base);
 fusionloc::relative_pose_factor_t FactorToLcm(const KeyframeFactor& factor);
 fusionloc::point_cloud_t KeyframePointsToLcm(const StereoVoResult& result);
+
+// A LASER_3D scan in the left camera frame for the laser-aided mode: p_camera = T_camera_laser
+// p_laser for each finite point; `non_finite` counts the points left out.
+LaserCloud LaserScanToCamera(const fusionloc::laser_scan_3d_t& scan,
+                             const Eigen::Isometry3d& T_camera_laser, int64_t* non_finite);
 
 // Same image size, intrinsics, baseline, rectification and mounting (to 1e-9): the periodic
 // repeats of STEREO_CALIBRATION do not restart the VO.
@@ -67,16 +76,30 @@ class StereoVoNode : public LcmNode {
   // changes (the periodic repeats do not).
   void StartOrRestart();
   void OnStereo(const bot_core::images_t& msg);
+  // Laser-aided mode: keeps the latest scans (kLaserScansKept) and the scanner's mounting.
+  void OnLaserScan(const fusionloc::laser_scan_3d_t& msg);
+  void OnLaserToBase(const bot_core::rigid_transform_t& msg);
+  // The kept scan nearest in time to `utime`, in the left camera frame; nullptr (and why in
+  // *why) when there is none or the mounting is unknown.
+  const LaserCloud* LaserFor(Utime utime, std::string* why);
 
   StereoVoOptions options_;
   LcmInterface* lcm_;
   std::string ch_stereo_, ch_calib_, ch_camera_to_base_, ch_pose_, ch_factors_, ch_points_;
+  std::string ch_laser_, ch_laser_to_base_;
   std::optional<fusionloc::stereo_calibration_t> intrinsics_;
   std::optional<bot_core::rigid_transform_t> camera_to_base_;
   StatusReporter status_;
   std::unique_ptr<StereoVo> vo_;
   StereoCalibration active_calibration_;
   int64_t frames_ = 0, tracked_ = 0, not_tracked_ = 0, keyframes_ = 0;
+  // Laser-aided mode.
+  static constexpr size_t kLaserScansKept = 3;
+  std::deque<fusionloc::laser_scan_3d_t> laser_scans_;  // latest first
+  std::optional<Eigen::Isometry3d> T_base_laser_;
+  LaserCloud laser_cloud_;  // the scan handed to the VO for the current frame
+  int64_t laser_scans_in_ = 0, laser_frames_ = 0, laser_fallback_frames_ = 0;
+  int64_t laser_points_non_finite_ = 0;
 };
 
 }  // namespace fl::vo
