@@ -307,6 +307,23 @@ def main():
         write("stereo_vo_node", "calib-stereo.bin",
               record(1, calib().encode()) + record(2, rigid(0.0).encode()) +
               b"".join(record(0, stereo(k).encode()) for k in range(3)))
+        def scan3d(k, n=300):
+            # Points 3-6 m in front of a camera mounted like the laser (both rigid(0.0)).
+            m = T["fusionloc.laser_scan_3d_t"]()
+            m.utime = 1000000 + 100000 * k - 2000
+            m.frame = "laser"
+            z = [rng.uniform(3, 6) for _ in range(n)]
+            m.x = [zi * rng.uniform(-0.6, 0.6) for zi in z]
+            m.y = [zi * rng.uniform(-0.6, 0.6) for zi in z]
+            m.z = z
+            m.intensity = [0.5] * n
+            m.num_points = n
+            return m
+
+        # stereo_vo_node in the laser-aided mode: LASER_3D (3) before each frame, its mounting (4).
+        write("stereo_vo_node", "laser-aided.bin",
+              record(1, calib().encode()) + record(2, rigid(0.0).encode()) + record(4, rigid(0.0).encode()) +
+              b"".join(record(3, scan3d(k).encode()) + record(0, stereo(k).encode()) for k in range(3)))
         write("stereo_vo_node", "stereo-before-calib.bin",
               record(0, stereo(0, 32, 24).encode()) + record(1, calib(32, 24).encode()) + record(0, stereo(1, 32, 24).encode()))
         write("fusion_node", "poses-factors.bin",

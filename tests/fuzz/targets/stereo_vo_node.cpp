@@ -1,5 +1,7 @@
-// Stereo VO node (fl-stereo-vo): STEREO, STEREO_CALIBRATION and CAMERA_TO_BASE messages,
-// decoded and handled by StereoVoNode (image conversion, calibration checks, the VO).
+// Stereo VO node (fl-stereo-vo --laser-aided): STEREO, STEREO_CALIBRATION, CAMERA_TO_BASE,
+// LASER_3D and LASER_3D_TO_BASE messages, decoded and handled by StereoVoNode (image
+// conversion, calibration checks, scans moved into the camera frame, the VO). The laser-aided
+// mode runs the plain path too (every frame without a usable scan).
 #include "../fuzz_messages.hpp"
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/stereo_vo/stereo_vo_lcm.hpp"
@@ -9,9 +11,12 @@ int Fuzz_stereo_vo_node(const uint8_t* data, size_t size) {
   fl::fuzz::Input in(data, size);
   auto lcm = fl::MakeLcm("memq://");
   fl::vo::StereoVoOptions options;
+  options.laser_depth.enabled = true;
   fl::vo::StereoVoNode node(options, lcm.get(), fl::ChannelMap());
   namespace ch = fl::channels;
-  fl::fuzz::FeedMessages(&in, lcm.get(), {ch::kStereo, ch::kStereoCalibration, ch::kCameraToBase},
-                         &node);
+  fl::fuzz::FeedMessages(
+      &in, lcm.get(),
+      {ch::kStereo, ch::kStereoCalibration, ch::kCameraToBase, ch::kLaser3d, ch::kLaser3dToBase},
+      &node);
   return 0;
 }
