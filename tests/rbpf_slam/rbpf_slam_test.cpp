@@ -224,38 +224,74 @@ TEST(RbpfSlam, DeferredKeyframeStageGivesTheSameFactorsAndTrajectory) {
 // scans in four: the filter runs every metre) is blended between the filtered scans around it,
 // so the odometry's drift between two filter runs is corrected on it too. (Without the blend
 // the final steps' heading error is the online one's, 0.0169 vs 0.0171 rad; with it 0.0063.)
-TEST(RbpfSlam, ScansBetweenFilterRunsAreBlendedIntoTheFinalTrajectory) {
+// Mean absolute heading error of each scan's motion from the previous scan, against the truth.
+double MeanStepHeadingError(const test::LoopRun& run, const std::vector<Pose2>& poses) {
+  double sum = 0.0;
+  for (size_t k = 1; k < poses.size(); ++k) {
+    const Pose2 e = run.truth[k - 1].between(run.truth[k]).between(poses[k - 1].between(poses[k]));
+    sum += std::abs(e.theta);
+  }
+  return sum / static_cast<double>(poses.size() - 1);
+}
+
+// A loop run with strong heading drift (0.05 rad/m) and sparse filter updates (0.9 m, 1 rad),
+// so most scans fall between filter runs.
+test::LoopRun SparseUpdateRun() {
   test::LoopRunOptions lo;
   lo.step_m = 0.25;
-  lo.odom_rot_bias = 0.05;  // [rad/m] strong heading drift
-  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  lo.odom_rot_bias = 0.05;  // [rad/m]
+  return test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+}
+
+struct SparseUpdateResult {
+  std::vector<Pose2> online;       // T_world_base per scan, as AddScan returned it
+  std::vector<Pose2> final_poses;  // T_world_base per scan after Finish()
+  RbpfSlamStats stats;
+};
+
+SparseUpdateResult RunSparseUpdates(const test::LoopRun& run, bool match_between_updates) {
   RbpfSlamOptions o = TestOptions(10);
   o.linear_update = 0.9;
   o.angular_update = 1.0;
   o.max_turn_rate = 0.0;
+  o.match_between_updates = match_between_updates;
   RbpfSlam slam(o);
-  std::vector<Pose2> online;
+  SparseUpdateResult out;
   for (size_t k = 0; k < run.utimes.size(); ++k) {
     ScanResult r;
-    ASSERT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
-    online.push_back(r.T_world_base);
+    EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    out.online.push_back(r.T_world_base);
   }
+  out.stats = slam.stats();
   slam.Finish();
-  const auto traj = slam.Trajectory();
-  ASSERT_EQ(traj.size(), run.utimes.size());
-  // Error of each scan's motion from the previous scan, against the truth's.
-  auto step_error = [&](const std::vector<Pose2>& poses) {
-    double sum = 0.0;
-    for (size_t k = 1; k < poses.size(); ++k) {
-      const Pose2 e = run.truth[k - 1].between(run.truth[k]).between(poses[k - 1].between(poses[k]));
-      sum += std::abs(e.theta);
-    }
-    return sum / static_cast<double>(poses.size() - 1);
-  };
-  std::vector<Pose2> final_poses;
-  for (const auto& p : traj) final_poses.push_back(p.T_world_base);
-  const double online_err = step_error(online), final_err = step_error(final_poses);
+  for (const auto& p : slam.Trajectory()) out.final_poses.push_back(p.T_world_base);
+  return out;
+}
+
+TEST(RbpfSlam, ScansBetweenFilterRunsAreBlendedIntoTheFinalTrajectory) {
+  // Without matching between updates the odometry carries the online pose of the skipped
+  // scans; the final trajectory ties them to their keyframes and removes most of that drift.
+  const test::LoopRun run = SparseUpdateRun();
+  const SparseUpdateResult r = RunSparseUpdates(run, /*match_between_updates=*/false);
+  ASSERT_EQ(r.final_poses.size(), run.utimes.size());
+  const double online_err = MeanStepHeadingError(run, r.online);
+  const double final_err = MeanStepHeadingError(run, r.final_poses);
   EXPECT_LT(final_err, 0.5 * online_err) << "online " << online_err << " final " << final_err;
+}
+
+TEST(RbpfSlam, ScansBetweenFilterRunsAreMatchedAloneWhenAsked) {
+  // With match_between_updates every scan the filter skips is matched against the best map, so
+  // the online pose of those scans follows the truth and not the odometry; the particles
+  // themselves are untouched (same keyframe count).
+  const test::LoopRun run = SparseUpdateRun();
+  const SparseUpdateResult on = RunSparseUpdates(run, true), off = RunSparseUpdates(run, false);
+  EXPECT_EQ(off.stats.matched_between_updates, 0);
+  EXPECT_GT(on.stats.matched_between_updates, static_cast<int64_t>(run.utimes.size()) / 2);
+  EXPECT_EQ(on.stats.processed, off.stats.processed);
+  EXPECT_EQ(on.stats.keyframes, off.stats.keyframes);
+  const double err_on = MeanStepHeadingError(run, on.online);
+  const double err_off = MeanStepHeadingError(run, off.online);
+  EXPECT_LT(err_on, 0.5 * err_off) << "matched " << err_on << " odometry " << err_off;
 }
 
 TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {

@@ -205,8 +205,19 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
     return Status::Ok();
   }
   res->T_world_base = CurrentPose();
+  bool matched = false;
+  if (opt_.match_between_updates) {
+    const MatchResult mr =
+        MatchScan(particles_[best_].map, match_base_, res->T_world_base, opt_.matcher);
+    stats_.matcher_evaluations += mr.evaluations;
+    if (mr.ok) {
+      res->T_world_base = mr.T_world_base;
+      matched = true;
+      ++stats_.matched_between_updates;
+    }
+  }
   const int kf = anchor_.keyframe;
-  RecordScan({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), false});
+  RecordScan({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), matched});
   return Status::Ok();
 }
 

@@ -382,6 +382,12 @@ struct RbpfSlamOptions {
                                    //     in a sparse log, skipping a scan doubles the motion the
                                    //     matcher must absorb at the next one (0.5 s made one ACES
                                    //     seed of six 0.16 m worse)
+  // A scan the filter does not run on (too little motion since the last update, or a fast turn)
+  // is matched alone against the best particle's map, from the best particle's pose plus the
+  // odometry since; the match (if it converged within the matcher's bounds) is that scan's
+  // pose (RBPF_POSE and the final trajectory). The filter's particles are not changed.
+  // Off: the odometry carries the pose between updates.
+  bool match_between_updates = true;
   int seed = 42;                   // [-] random seed (runs are reproducible)
   GridOptions grid;
   MotionOptions motion;
@@ -397,6 +403,7 @@ struct RbpfSlamOptions {
     a->Visit("angular_update", &angular_update);
     a->Visit("max_turn_rate", &max_turn_rate);
     a->Visit("turn_skip_max_gap", &turn_skip_max_gap);
+    a->Visit("match_between_updates", &match_between_updates);
     a->Visit("seed", &seed);
     a->Visit("grid", &grid);
     a->Visit("motion", &motion);

@@ -62,6 +62,7 @@ struct RbpfSlamStats {
   int64_t rejected_bad_scan = 0;        // beam count / geometry changed, non-finite odometry
   int64_t invalid_beams = 0;            // NaN / inf / zero / over-range beams ignored
   int64_t skipped_fast_turn = 0;        // scans not used: odometry turning > max_turn_rate
+  int64_t matched_between_updates = 0;  // scans between updates matched alone (their pose)
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates that fell back to odometry
@@ -149,7 +150,8 @@ class RbpfSlam {
     int keyframe;          // latest keyframe when the scan arrived
     fl::Pose2 T_kf_base;   // pose relative to that keyframe
     fl::Pose2 odom;        // odometry pose (flagged jumps removed) at the scan
-    bool filtered;         // the filter ran on this scan (its pose is scan-matched)
+    bool filtered;         // its pose is scan-matched (the filter ran on it, or it was matched
+                           //     alone between updates: match_between_updates)
   };
   struct Keyframe {
     fl::Utime utime;
