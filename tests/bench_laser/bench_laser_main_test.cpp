@@ -8,9 +8,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <regex>
 #include <string>
 
+#include "bench_json.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "importer_fixtures.hpp"
 #include "test_paths.hpp"
@@ -22,15 +22,8 @@ using fl::test::ReadFile;
 using fl::test::RunCommand;
 using fl::test::TempDir;
 
-// The value of `key` in the metrics of the run named `run` in a bench JSON (NaN if absent).
 double Metric(const std::string& json, const std::string& run, const std::string& key) {
-  const size_t at = json.find("{\"name\": \"" + run + "\"");
-  if (at == std::string::npos) return std::nan("");
-  const size_t end = json.find("\n", at);
-  const std::string row = json.substr(at, end - at);
-  std::smatch m;
-  if (!std::regex_search(row, m, std::regex("\"" + key + "\": ([-0-9.e+]+)"))) return std::nan("");
-  return std::stod(m[1]);
+  return fl::test::BenchMetric(json, run, key);
 }
 
 TEST(BenchLaserMain, RelationsBesideALogAreScoredOnEveryRunAndTheMean) {

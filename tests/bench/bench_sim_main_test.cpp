@@ -1,0 +1,51 @@
+// fl-bench-sim end to end on a short run of the `paper` world: every estimate (RBPF alone, VO
+// alone, fused) is reported beside the wheel odometry's own ATE (run <world>_odometry) and read
+// against it (ate_over_odometry = its ATE over the odometry's); the error plot is written.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include "bench_json.hpp"
+#include "test_paths.hpp"
+
+namespace {
+
+using fl::test::BenchMetric;
+using fl::test::BinDir;
+using fl::test::RunCommand;
+using fl::test::SourceDir;
+using fl::test::TempDir;
+
+TEST(BenchSimMain, EveryEstimateIsReadAgainstTheWheelOdometry) {
+  TempDir dir;
+  const auto r = RunCommand(BinDir() + "/fl-bench-sim --worlds paper --duration 10 --config-dir " +
+                                SourceDir() + "/config --json out.json --png-dir png",
+                            dir);
+  ASSERT_EQ(r.status, 0) << r.out << r.err;
+  const std::string json = fl::test::ReadFile(dir.file("out.json"));
+  const double odometry = BenchMetric(json, "paper_odometry", "ate_rmse_m");
+  ASSERT_TRUE(std::isfinite(odometry) && odometry > 0) << json;
+  EXPECT_GT(BenchMetric(json, "paper_odometry", "items"), 50) << json;
+  EXPECT_TRUE(std::isnan(BenchMetric(json, "paper_odometry", "ate_over_odometry"))) << json;
+  for (const std::string run : {"paper_rbpf_only", "paper_vo_only", "paper_fused"}) {
+    const double ate = BenchMetric(json, run, "ate_rmse_m");
+    ASSERT_TRUE(std::isfinite(ate)) << run << "\n" << json;
+    EXPECT_NEAR(BenchMetric(json, run, "ate_over_odometry"), ate / odometry,
+                1e-3 * ate / odometry + 1e-6)
+        << run;
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir.file("png/sim_paper_errors.png")));
+}
+
+TEST(BenchSimMain, AMissingWorldIsAnErrorNamingItsFile) {
+  TempDir dir;
+  const auto r = RunCommand(BinDir() + "/fl-bench-sim --worlds nowhere --config-dir " +
+                                SourceDir() + "/config --json out.json --png-dir png",
+                            dir);
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE((r.out + r.err).find("sim_nowhere.yaml"), std::string::npos) << r.out << r.err;
+}
+
+}  // namespace
