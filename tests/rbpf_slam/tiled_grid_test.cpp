@@ -37,6 +37,34 @@ TEST(TiledGrid, ScansFromOrToAbsurdPlacesAreLeftOut) {
   EXPECT_EQ(g.NumTiles(), only_good.NumTiles());
 }
 
+TEST(TiledGrid, AScanThatWouldGrowTheMapBeyondItsMaximumSizeIsRefused) {
+  GridOptions o = Opts();
+  o.max_size_m = 100.0;
+  TiledGrid g(o);
+  ASSERT_TRUE(g.IntegrateScan({0.0, 0.0}, {{1.0, 0.0}}, {1}));
+  const int tiles = g.NumTiles();
+  int x0, y0, x1, y1;
+  ASSERT_TRUE(g.Bounds(&x0, &y0, &x1, &y1));
+  // 60 m away along x: the box would be about 60 m wide, within 100 m.
+  EXPECT_TRUE(g.IntegrateScan({60.0, 0.0}, {{61.0, 0.0}}, {1}));
+  EXPECT_TRUE(g.IsOccupied(1220, 0));
+  // An odometry jump of 5 km (or one beam 5 km long): refused, the map as it was.
+  const int tiles_before = g.NumTiles();
+  EXPECT_FALSE(g.IntegrateScan({5000.0, 5000.0}, {{5001.0, 5000.0}}, {1}));
+  EXPECT_FALSE(g.IntegrateScan({0.0, 0.0}, {{1.0, 0.0}, {0.0, -5000.0}}, {1, 1}));
+  EXPECT_EQ(g.NumTiles(), tiles_before);
+  EXPECT_GT(tiles_before, tiles);
+  int bx0, by0, bx1, by1;
+  ASSERT_TRUE(g.Bounds(&bx0, &by0, &bx1, &by1));
+  EXPECT_LE((bx1 - bx0) * o.resolution, 100.0);
+  EXPECT_LE((by1 - by0) * o.resolution, 100.0);
+  // The default (2000 m) takes a 1.5 km drive.
+  TiledGrid wide(Opts());
+  EXPECT_TRUE(wide.IntegrateScan({0.0, 0.0}, {{1.0, 0.0}}, {1}));
+  EXPECT_TRUE(wide.IntegrateScan({1500.0, 0.0}, {{1501.0, 0.0}}, {1}));
+  EXPECT_FALSE(wide.IntegrateScan({2100.0, 0.0}, {{2101.0, 0.0}}, {1}));
+}
+
 TEST(TiledGrid, DistanceFieldIsEuclideanDistanceToNearestObstacle) {
   TiledGrid g(Opts());
   MakeObstacle(&g, 10, 10);

@@ -55,6 +55,11 @@ Status GridOptions::Validate() const {
   if (free_space_margin < 0 || free_space_margin > 10) {
     return Status::Error("grid.free_space_margin must be in [0, 10] cells");
   }
+  if (!(max_size_m >= 10.0) || !(max_size_m / resolution <= 1048576.0)) {
+    return Status::Error("grid.max_size_m = " + Num(max_size_m) +
+                         " m must be at least 10 m and at most 2^20 cells of grid.resolution "
+                         "(e.g. 2000)");
+  }
   return Status::Ok();
 }
 

@@ -303,15 +303,18 @@ void RbpfSlam::ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* res)
   res->T_world_base = particles_[best_].pose;
 }
 
-void RbpfSlam::Integrate(Particle* p) { IntegrateInto(&p->map, p->pose, hits_base_); }
+bool RbpfSlam::Integrate(Particle* p) { return IntegrateInto(&p->map, p->pose, hits_base_); }
 
-void RbpfSlam::IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
+bool RbpfSlam::IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
                              const std::vector<Eigen::Vector2d>& points_base) {
   endpoints_world_.resize(points_base.size());
   is_hit_.assign(points_base.size(), 1);
   for (size_t k = 0; k < points_base.size(); ++k)
     endpoints_world_[k] = T_world_base * points_base[k];
-  map->IntegrateScan(T_world_base * T_base_laser_.translation(), endpoints_world_, is_hit_);
+  if (map->IntegrateScan(T_world_base * T_base_laser_.translation(), endpoints_world_, is_hit_))
+    return true;
+  ++stats_.map_integrations_refused;
+  return false;
 }
 
 bool RbpfSlam::KeyframeDue(const fl::Pose2& pose) const {

@@ -297,7 +297,20 @@ void TiledGrid::OnBecameFree(int cx, int cy) {
   }
 }
 
-void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
+bool TiledGrid::FitsMaxSize(int cx0, int cy0, int cx1, int cy1) const {
+  // The tiles Grow would hold after touching cells [cx0, cx1] x [cy0, cy1], the likelihood
+  // field's radius around them included.
+  const int tx0 = FloorDiv(cx0 - radius_, kTileSize) - 2, ty0 = FloorDiv(cy0 - radius_, kTileSize) - 2;
+  const int tx1 = FloorDiv(cx1 + radius_, kTileSize) + 3, ty1 = FloorDiv(cy1 + radius_, kTileSize) + 3;
+  const int64_t nx = static_cast<int64_t>(ntx_ > 0 ? std::max(tx0_ + ntx_, tx1) : tx1) -
+                     (ntx_ > 0 ? std::min(tx0_, tx0) : tx0);
+  const int64_t ny = static_cast<int64_t>(nty_ > 0 ? std::max(ty0_ + nty_, ty1) : ty1) -
+                     (nty_ > 0 ? std::min(ty0_, ty0) : ty0);
+  const double max_tiles = opt_.max_size_m * inv_res_ / kTileSize + 5.0;  // + Grow's margins
+  return static_cast<double>(nx) <= max_tiles && static_cast<double>(ny) <= max_tiles;
+}
+
+bool TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
                               const std::vector<Eigen::Vector2d>& endpoints_world,
                               const std::vector<uint8_t>& is_hit) {
   // Cell indices are ints: a scan from (or a beam to) beyond kMaxCellIndex cells, or not
@@ -305,9 +318,24 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
   const auto in_range = [&](const Eigen::Vector2d& p) {
     return std::abs(p.x() * inv_res_) < kMaxCellIndex && std::abs(p.y() * inv_res_) < kMaxCellIndex;
   };
-  if (!in_range(origin_world)) return;
+  if (!in_range(origin_world)) return false;
   const int ox = static_cast<int>(std::floor(origin_world.x() * inv_res_));
   const int oy = static_cast<int>(std::floor(origin_world.y() * inv_res_));
+  // The tile table is dense over the map's bounding box: a scan far from the map (an odometry
+  // jump) would allocate it for the whole box, so such a scan is refused before any growth.
+  {
+    int cx0 = ox, cy0 = oy, cx1 = ox, cy1 = oy;
+    for (const Eigen::Vector2d& e : endpoints_world) {
+      if (!in_range(e)) continue;
+      const int ex = static_cast<int>(std::floor(e.x() * inv_res_));
+      const int ey = static_cast<int>(std::floor(e.y() * inv_res_));
+      cx0 = std::min(cx0, ex);
+      cx1 = std::max(cx1, ex);
+      cy0 = std::min(cy0, ey);
+      cy1 = std::max(cy1, ey);
+    }
+    if (!FitsMaxSize(cx0, cy0, cx1, cy1)) return false;
+  }
   const int step = std::max(1, opt_.free_space_beam_step);
   // Copies of the members the inner loop reads: stores into int16 log-odds could alias them, so
   // the compiler would reload them for every cell.
@@ -377,6 +405,7 @@ void TiledGrid::IntegrateScan(const Eigen::Vector2d& origin_world,
     UpdateCell(static_cast<int>(std::floor(endpoints_world[k].x() * inv_res_)),
                static_cast<int>(std::floor(endpoints_world[k].y() * inv_res_)), hit_);
   }
+  return true;
 }
 
 bool TiledGrid::Bounds(int* min_cx, int* min_cy, int* max_cx, int* max_cy) const {

@@ -391,6 +391,7 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   status_.Set("skipped_fast_turn", static_cast<double>(s.skipped_fast_turn));
   status_.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
   status_.Set("invalid_beams", static_cast<double>(s.invalid_beams));
+  status_.Set("map_integrations_refused", static_cast<double>(s.map_integrations_refused));
   status_.SetState(fusionloc::status_t::LEVEL_OK, "running");
 }
 
@@ -425,7 +426,8 @@ std::string RbpfSlamNode::Summary() const {
          ", scans held back in fast turns " + std::to_string(s.skipped_fast_turn) +
          ", dropped (time) " + std::to_string(s.dropped_time_backwards) + ", rejected " +
          std::to_string(s.rejected_bad_scan) + ", odometry jumps " +
-         std::to_string(s.odometry_jumps);
+         std::to_string(s.odometry_jumps) + ", map integrations refused (beyond grid.max_size_m) " +
+         std::to_string(s.map_integrations_refused);
 }
 
 }  // namespace fl::rbpf

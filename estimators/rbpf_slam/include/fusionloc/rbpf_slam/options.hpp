@@ -29,6 +29,11 @@ struct GridOptions {
                                    //     so obstacles drift away from where they were seen from and
                                    //     the map grows (simulated URG, 10 cm noise: 3.2 % larger
                                    //     after 300 s with 1 cell, 0.4 % with 4; RBPF_SLAM.md)
+  double max_size_m = 2000.0;      // [m] the map's bounding box grows to at most this a side; a
+                                   //     scan that would grow it further is left out of the map
+                                   //     and counted (map_integrations_refused): an odometry jump,
+                                   //     or a place larger than configured. Bounds the tile table
+                                   //     (2000 m at 5 cm: 6.3 MB per particle)
 
   template <class A>
   void Serialize(A* a) {
@@ -42,6 +47,7 @@ struct GridOptions {
     a->Visit("log_odds_free", &log_odds_free);
     a->Visit("free_space_beam_step", &free_space_beam_step);
     a->Visit("free_space_margin", &free_space_margin);
+    a->Visit("max_size_m", &max_size_m);
   }
   Status Validate() const;
 };

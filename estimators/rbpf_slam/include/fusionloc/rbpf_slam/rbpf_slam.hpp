@@ -61,6 +61,8 @@ struct RbpfSlamStats {
   int64_t dropped_time_backwards = 0;   // scans whose time did not increase
   int64_t rejected_bad_scan = 0;        // beam count / geometry changed, non-finite odometry
   int64_t invalid_beams = 0;            // NaN / inf / zero / over-range beams ignored
+  int64_t map_integrations_refused = 0; // scans a particle's map (or a rebuilt map) left out:
+                                        // beyond grid.max_size_m or absurd coordinates
   int64_t skipped_fast_turn = 0;        // scans not used: odometry turning > max_turn_rate
   int64_t matched_between_updates = 0;  // scans between updates matched alone (their pose)
   int64_t odometry_jumps = 0;
@@ -180,9 +182,9 @@ class RbpfSlam {
   void ConvertScan(const LaserScan& scan, ScanResult* result);
   void RecordScan(const PathRecord& record);  // into path_, if kept
   void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
-  void Integrate(Particle* p);
+  bool Integrate(Particle* p);
   // Integrates points (base frame) seen from T_world_base into map.
-  void IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
+  bool IntegrateInto(TiledGrid* map, const fl::Pose2& T_world_base,
                      const std::vector<Eigen::Vector2d>& points_base);
   // Whether a best-particle pose would become a keyframe (distance or angle from the anchor).
   bool KeyframeDue(const fl::Pose2& pose) const;

@@ -58,7 +58,9 @@ class TiledGrid {
 
   // Integrates one scan: `origin_world` is the laser position, `endpoints_world` the beam
   // ends, `is_hit[k]` false for beams only clearing free space (longer than max range).
-  void IntegrateScan(const Eigen::Vector2d& origin_world,
+  // Returns false, leaving the map as it was, when the scan would grow the map beyond
+  // grid.max_size_m a side or its origin is beyond kMaxCellIndex cells or not finite.
+  bool IntegrateScan(const Eigen::Vector2d& origin_world,
                      const std::vector<Eigen::Vector2d>& endpoints_world,
                      const std::vector<uint8_t>& is_hit);
 
@@ -109,6 +111,8 @@ class TiledGrid {
   }
   Tile* MutableTile(int tx, int ty);
   void Grow(int tx, int ty);
+  // Whether touching cells [cx0, cx1] x [cy0, cy1] keeps the tile table within max_size_m.
+  bool FitsMaxSize(int cx0, int cy0, int cx1, int cy1) const;
   int RawDist(int cx, int cy) const {
     const Tile* t = TileAt(cx >> kTileBits, cy >> kTileBits);
     return t ? t->dist[((cy & (kTileSize - 1)) << kTileBits) | (cx & (kTileSize - 1))] : dist_max_;
