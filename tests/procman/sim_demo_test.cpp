@@ -76,7 +76,8 @@ TEST(ProcmanSimDemo, RealProcessesOverLiveLcmProduceFusedPoses) {
   EXPECT_GE(count["LASER"], 55);
   EXPECT_GE(count["RBPF_POSE"], count["LASER"] - 3);
   EXPECT_GE(count["FUSED_POSE"], count["LASER"] - 3);
-  EXPECT_GE(count["VO_FACTORS"], 8);  // 2 Hz stereo
+  // 2 Hz stereo, a keyframe factor at least every 2 s (keyframe_max_interval_s), more in turns.
+  EXPECT_GE(count["VO_FACTORS"], 3);
   EXPECT_GE(count["FUSED_TRAJECTORY"], 1);
   EXPECT_GE(count["STATUS_FL_FUSION"], 1);
   // The fusion saved its 3D map when the deputy stopped it.

@@ -78,6 +78,39 @@ TEST_F(StereoVoTest, TracksSidewaysMotionOfAPlane) {
   EXPECT_EQ(factors, 2);
 }
 
+// The overlap rule counts the keyframe's tracks as the first frame after it carried them: a
+// camera that keeps seeing the same plane makes no keyframe for overlap until its view has
+// moved on (with all stereo matches as the reference, a fraction of which never closes a
+// quadrilateral, nearly every frame became a keyframe).
+TEST_F(StereoVoTest, OverlapKeyframesFollowTheViewNotTheMatchCount) {
+  StereoVoOptions opts;
+  opts.keyframe_translation_m = 100.0;
+  opts.keyframe_rotation_deg = 90.0;
+  opts.keyframe_max_interval_s = 100.0;
+  cv::Mat l, r;
+  // k frames of sideways motion (5 px each); returns the frames at which factors were made.
+  auto run = [&](double min_overlap, int frames) {
+    opts.keyframe_min_overlap = min_overlap;
+    StereoVo vo(opts, calib_);
+    std::vector<int> factor_frames;
+    for (int k = 0; k < frames; ++k) {
+      Pair(k, &l, &r);
+      const StereoVoResult res = vo.AddStereoFrame(kT0 + k * kDt, l, r);
+      EXPECT_TRUE(k == 0 || res.state == TrackingState::kTracked) << k << ": " << res.message;
+      if (res.factor) factor_frames.push_back(k);
+    }
+    return factor_frames;
+  };
+  // 20 frames move the view by 100 of its 640 px: more than half of the tracks stay.
+  EXPECT_TRUE(run(0.5, 20).empty());
+  // Asking for 90 % overlap makes keyframes, but not every frame: each needs ~10 % of the
+  // tracks to leave (the old reference made all 19 frames keyframes here).
+  const std::vector<int> dense = run(0.9, 20);
+  ASSERT_FALSE(dense.empty());
+  EXPECT_GE(dense.front(), 3);
+  EXPECT_LE(dense.size(), 6u);
+}
+
 // The scan of the plane at kDepth in the left camera frame (scan lines every 3 px, a point
 // every 2 px along them).
 LaserCloud PlaneCloud(const StereoCalibration& c, Utime utime) {

@@ -374,7 +374,7 @@ void StereoVo::StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* r
   T_kf_camera_.setIdentity();
   cov_kf_camera_.setZero();
   keyframe_max_track_id_ = next_track_id_ - 1;
-  keyframe_tracks_ = frame.stereo_matches;
+  keyframe_tracks_ = -1;  // set by the next tracked frame (AddKeyframeFactorIfDue)
   stages::KeyframePoints(camera_, frame, offset_px_, &result->keyframe_points,
                          &result->keyframe_intensities);
 }
@@ -420,6 +420,7 @@ void StereoVo::AdvancePose(const stages::Refinement& refined, double dt_s, Stere
 
 void StereoVo::AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int tracked_from_keyframe,
                                       StereoVoResult* result) {
+  if (keyframe_tracks_ < 0) keyframe_tracks_ = tracked_from_keyframe;
   if (!stages::NeedsKeyframe(T_kf_camera_, tracked_from_keyframe, keyframe_tracks_,
                              frame.utime - keyframe_utime_, options_)) {
     return;

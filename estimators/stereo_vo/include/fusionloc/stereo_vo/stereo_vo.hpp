@@ -75,7 +75,10 @@ struct StereoVoOptions {
   // exceeds one of these.
   double keyframe_translation_m = 1.0;   // [m]
   double keyframe_rotation_deg = 10.0;   // [deg]
-  double keyframe_min_overlap = 0.5;     // [-] fraction of the keyframe's features still tracked
+  // [-] fraction still tracked of the keyframe's tracks that the first frame after it carried
+  // over (the frame-to-frame inliers, not all stereo matches: a fraction of those never closes a
+  // quadrilateral, so counting them made almost every frame a keyframe)
+  double keyframe_min_overlap = 0.5;
   double keyframe_max_interval_s = 2.0;  // [s] at least one keyframe this often
   // Frame checks.
   double min_mean_intensity = 8.0;    // [gray] darker: "black frame", not tracked
@@ -249,7 +252,9 @@ class StereoVo {
   Eigen::Isometry3d T_kf_camera_ = Eigen::Isometry3d::Identity();
   Eigen::Matrix<double, 6, 6> cov_kf_camera_ = Eigen::Matrix<double, 6, 6>::Zero();
   int64_t keyframe_max_track_id_ = -1;
-  int keyframe_tracks_ = 0;
+  // Tracks of the keyframe carried into the first frame after it (the overlap's reference);
+  // -1 until that frame is tracked.
+  int keyframe_tracks_ = -1;
   int64_t next_track_id_ = 0;
   // Disparity offset filter (scalar Kalman, random walk).
   double offset_px_ = 0;

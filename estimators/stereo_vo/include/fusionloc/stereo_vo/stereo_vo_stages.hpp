@@ -185,8 +185,9 @@ void AssignNewTracks(StereoFrame* frame, int64_t* next_track_id);
 
 // ---- keyframe decision ----
 // A new keyframe when the motion since the keyframe reaches keyframe_translation_m or
-// keyframe_rotation_deg, less than keyframe_min_overlap of its tracks remain, or
-// keyframe_max_interval_s has passed (since_keyframe_us).
+// keyframe_rotation_deg, fewer than keyframe_min_overlap of keyframe_tracks (the keyframe's
+// tracks that the first frame after it carried over) remain, or keyframe_max_interval_s has
+// passed (since_keyframe_us).
 bool NeedsKeyframe(const Eigen::Isometry3d& T_kf_camera, int tracked_from_keyframe,
                    int keyframe_tracks, Utime since_keyframe_us, const StereoVoOptions& options);
 // The factor's motion, covariance and information in the base frame (times and ids not set).
