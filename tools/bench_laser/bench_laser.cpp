@@ -37,7 +37,7 @@
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/importers/carmen.hpp"
-#include "fusionloc/rbpf_slam/odometry_buffer.hpp"
+#include "fusionloc/common/odometry_buffer.hpp"
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
 #include "fusionloc/sim/simulator.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
@@ -58,7 +58,7 @@ struct Input {
 
 struct LogData {
   std::vector<fl::rbpf::LaserScan> scans;
-  fl::rbpf::OdometryBuffer odom{std::numeric_limits<int64_t>::max() / 4, 5 * fl::kUtimePerSecond};
+  fl::OdometryBuffer odom{std::numeric_limits<int64_t>::max() / 4, 5 * fl::kUtimePerSecond};
   fl::eval::Trajectory ground_truth;
   fl::Pose2 T_base_laser;  // LASER_TO_BASE (identity for the CARMEN importer's logs)
 };

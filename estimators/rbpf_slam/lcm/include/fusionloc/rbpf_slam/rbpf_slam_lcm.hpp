@@ -25,7 +25,7 @@
 #include "fusionloc/common/lcm_process.hpp"
 #include "fusionloc/common/stream_merger.hpp"
 #include "fusionloc/occupancy_grid_t.hpp"
-#include "fusionloc/rbpf_slam/odometry_buffer.hpp"
+#include "fusionloc/common/odometry_buffer.hpp"
 #include "fusionloc/rbpf_slam/rbpf_slam.hpp"
 #include "fusionloc/relative_pose_factor_t.hpp"
 #include "fusionloc/trajectory_t.hpp"
@@ -71,7 +71,7 @@ class ScanOdometrySync {
   Utime max_wait_us_;
   StreamMerger<Input> merger_;
   int laser_stream_ = -1, odom_stream_ = -1;
-  OdometryBuffer odom_buffer_;
+  fl::OdometryBuffer odom_buffer_;
   std::deque<LaserScan> pending_;
 };
 

@@ -1,10 +1,10 @@
-#include "fusionloc/rbpf_slam/odometry_buffer.hpp"
+#include "fusionloc/common/odometry_buffer.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-namespace fl::rbpf {
+namespace fl {
 namespace {
 
 TEST(OdometryBuffer, InterpolatesAtScanTime) {
@@ -38,4 +38,4 @@ TEST(OdometryBuffer, RejectsBadInputWithAClearError) {
 }
 
 }  // namespace
-}  // namespace fl::rbpf
+}  // namespace fl

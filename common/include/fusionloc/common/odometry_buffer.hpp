@@ -1,4 +1,5 @@
-// Wheel odometry poses buffered by time, interpolated at a laser scan's time.
+// Wheel odometry poses buffered by time, interpolated at a sensor time (a laser scan, a stereo
+// frame); the RBPF-SLAM and the stereo VO read ODOMETRY through it.
 #pragma once
 
 #include <deque>
@@ -7,7 +8,7 @@
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
 
-namespace fl::rbpf {
+namespace fl {
 
 class OdometryBuffer {
  public:
@@ -38,4 +39,4 @@ class OdometryBuffer {
   std::deque<Sample> samples_;
 };
 
-}  // namespace fl::rbpf
+}  // namespace fl

@@ -1,4 +1,4 @@
-#include "fusionloc/rbpf_slam/odometry_buffer.hpp"
+#include "fusionloc/common/odometry_buffer.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include "fusionloc/common/time.hpp"
 
-namespace fl::rbpf {
+namespace fl {
 
 fl::Status OdometryBuffer::Add(fl::Utime utime, const fl::Pose2& p) {
   if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.theta)) {
@@ -49,4 +49,4 @@ fl::Status OdometryBuffer::Lookup(fl::Utime utime, fl::Pose2* out) const {
   return Status::Ok();
 }
 
-}  // namespace fl::rbpf
+}  // namespace fl
