@@ -12,6 +12,7 @@
 // update") and fully solved when it asks (loop closure, period) and at the end.
 // Outputs per world: a Fig. 6-style PNG of x, y, heading error over time for the four.
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <filesystem>
 #include <iostream>
@@ -44,8 +45,26 @@ struct WorldResult {
   // (x, y, yaw) (expected about 3 if the information is calibrated).
   std::vector<double> laser_chi2, vo_chi2;
   int64_t scans = 0, vo_frames = 0, vo_factors = 0, laser_factors = 0, rejected = 0;
+  // Stereo frames the VO did not track (not tracked, rejected, or a new segment after the first).
+  int64_t vo_lost = 0;
+  std::map<std::string, int64_t> vo_lost_reasons;  // message -> frames
   double wall_s = 0;
 };
+
+// The kind of a VO message without its numbers: "not tracked: only 12 closed quadrilaterals
+// (need 20) ..." -> "only closed quadrilaterals".
+std::string LostReason(const std::string& message) {
+  std::string out;
+  const size_t colon = message.find(": ");
+  for (char c : message.substr(colon == std::string::npos ? 0 : colon + 2)) {
+    if (c == '(' || c == ';') break;
+    if (std::isdigit(static_cast<unsigned char>(c)) || c == '.') continue;
+    if (c == ' ' && (out.empty() || out.back() == ' ')) continue;
+    out += c;
+  }
+  while (!out.empty() && out.back() == ' ') out.pop_back();
+  return out;
+}
 
 fl::eval::StampedPose Stamp(fl::Utime t, const fl::Pose2& p) { return {t, p.ToIsometry3()}; }
 
@@ -108,6 +127,7 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
       const fl::Pose2 T_odom_base(f.odometry->x, f.odometry->y, f.odometry->theta);
       out.odometry.push_back(Stamp(f.odometry->utime, T_odom_base));
       if (!fusion.AddOdometry(f.odometry->utime, T_odom_base).ok()) ++out.rejected;
+      if (vo) vo->AddOdometry(f.odometry->utime, T_odom_base);  // as fl-stereo-vo does
     }
     if (f.laser && rbpf) {
       fl::rbpf::LaserScan scan;
@@ -132,6 +152,10 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
       if (fl::vo::StereoImagesToGray(*f.stereo, &left, &right).ok()) {
         const fl::vo::StereoVoResult r = vo->AddStereoFrame(f.stereo->utime, left, right);
         ++out.vo_frames;
+        if (r.state != fl::vo::TrackingState::kTracked && out.vo_frames > 1) {
+          ++out.vo_lost;
+          ++out.vo_lost_reasons[LostReason(r.message)];
+        }
         if (r.pose_valid) {
           out.vo.push_back({r.utime, fl::Pose2::FromIsometry3(r.T_world_base).ToIsometry3()});
         }
@@ -300,6 +324,10 @@ int main(int argc, char** argv) {
       }
       if (e == 1) {
         run.Add("factors", static_cast<double>(r.vo_factors));
+        run.Add("lost_frames", static_cast<double>(r.vo_lost));
+        std::ostringstream why;
+        for (const auto& [reason, n] : r.vo_lost_reasons) why << (why.tellp() > 0 ? "; " : "") << n << "x " << reason;
+        if (r.vo_lost > 0) run.note = "lost frames: " + why.str();
         if (!r.vo_chi2.empty())
           run.Add("factor_chi2_median", fl::bench::ComputeStats(r.vo_chi2).median);
       }
