@@ -6,6 +6,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <map>
 
@@ -14,6 +15,7 @@
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/status_t.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 #include "stereo_fixtures.hpp"
 #include "test_paths.hpp"
 
@@ -207,6 +209,61 @@ TEST(StereoVoLcm, ProcessReplaysALog) {
   }
   EXPECT_EQ(duplicates, 1);
   EXPECT_TRUE(saw_rectified_error) << "status should report the unrectified calibration";
+}
+
+// use_odometry_prior: ODOMETRY reaches the VO as its motion prior (every tracked frame after
+// the first is predicted by it); a non-finite sample is dropped and counted.
+TEST(StereoVoLcm, ProcessUsesTheOdometryPrior) {
+  const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
+  if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
+  fl::test::TempDir dir;
+  const StereoCalibration calib = fl::test::stereo::TestCalibration();
+  const cv::Mat tex = fl::test::stereo::Texture(900, 700, 5);
+  {
+    fl::LcmLogWriter log(dir.file("in.lcmlog"));
+    const Utime t0 = 2000000000;
+    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0 - 5);
+    log.Write(fl::channels::kCameraToBase, MakeCameraToBase(calib), t0 - 4);
+    cv::Mat l, r;
+    for (int k = 0; k < 10; ++k) {
+      const Utime t = t0 + 100000 * k;
+      fusionloc::wheel_odometry_t o{};
+      o.utime = t;
+      o.y = -0.05 * k;  // the camera's +x is the base's -y
+      if (k == 5) o.theta = std::nan("");
+      log.Write(fl::channels::kOdometry, o, t);
+      fl::test::stereo::PlanePair(tex, calib, 5.0, 0.05 * k, 0.0, &l, &r);
+      log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);
+    }
+    log.Close();
+  }
+  {
+    std::ofstream yaml(dir.file("vo.yaml"));
+    yaml << "use_odometry_prior: true\n";
+  }
+  const std::string cmd = bin + " --config " + dir.file("vo.yaml") + " --lcm-url log:" +
+                          dir.file("in.lcmlog") + "," + dir.file("out.lcmlog") +
+                          " --log-level error > " + dir.file("stdout.txt") + " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  fl::LcmLogReader reader(dir.file("out.lcmlog"));
+  fl::LcmLogEvent ev;
+  fusionloc::status_t last_status;
+  while (reader.Next(&ev)) {
+    if (ev.channel == "STATUS_FL_STEREO_VO") {
+      const int size = static_cast<int>(ev.data.size());
+      ASSERT_EQ(last_status.decode(ev.data.data(), 0, size), size);
+    }
+  }
+  double predicted = -1;
+  for (int k = 0; k < last_status.num_keys; ++k) {
+    if (last_status.keys[static_cast<size_t>(k)] == "odometry_prior_frames") {
+      predicted = last_status.values[static_cast<size_t>(k)];
+    }
+  }
+  // Frames 1..9 are tracked and predicted, but frame 5: when it arrives the odometry ends at
+  // frame 4's time (the odometry is interpolated, never extrapolated).
+  EXPECT_EQ(predicted, 8);
+  EXPECT_EQ(last_status.messages_dropped, 1);  // the NaN sample
 }
 
 // LASER_3D converted to the left camera frame through both mountings: a point on the optical

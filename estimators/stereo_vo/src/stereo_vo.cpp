@@ -215,9 +215,13 @@ StereoVoResult StereoVo::Track(std::unique_ptr<stages::StereoFrame> cur, StereoV
   const Utime utime = cur->utime;
   const double dt_s = static_cast<double>(utime - prev.utime) * 1e-6;
   double t0 = NowMs();
-  const stages::FrameMatch match =
-      stages::SearchMotion(camera_, prev, *cur, stages::VelocityPredicts(dt_s, velocity_dt_s_),
-                           T_prev_velocity_, offset_px_, options_);
+  // The motion prediction: the wheel odometry's if there is one, else constant velocity.
+  Eigen::Isometry3d T_prev_predicted = T_prev_velocity_;
+  result.stats.odometry_prior = OdometryMotion(prev.utime, utime, &T_prev_predicted);
+  const bool predict = result.stats.odometry_prior ||
+                       stages::VelocityPredicts(dt_s, velocity_dt_s_);
+  const stages::FrameMatch match = stages::SearchMotion(camera_, prev, *cur, predict,
+                                                        T_prev_predicted, offset_px_, options_);
   const std::vector<StereoCorrespondence>& corr = match.corr.corr;
   result.stats.quads = match.quads.stats;
   result.stats.ms_matching += NowMs() - t0;
@@ -350,10 +354,16 @@ StereoVoResult StereoVo::Initialize(std::unique_ptr<stages::StereoFrame> frame,
     ++segment_;
     result.new_segment = true;
     result.segment = segment_;
+    // The pose across the gap: the wheel odometry's motion if there is one, else unchanged.
+    Eigen::Isometry3d T_gap = Eigen::Isometry3d::Identity();
+    const bool bridged = OdometryMotion(last_good_->utime, frame->utime, &T_gap);
+    T_world_camera_ = T_world_camera_ * T_gap;
     result.message =
         "initialized a new segment: " + std::to_string((frame->utime - last_good_->utime) * 1e-6) +
         " s since the last tracked frame (max_gap_s " + std::to_string(options_.max_gap_s) +
-        "); the motion across the gap is unknown and no factor links it";
+        "); no factor links it" +
+        (bridged ? ", the pose is carried across it by the wheel odometry"
+                 : ", and the motion across it is unknown (no wheel odometry)");
   } else {
     result.message = "initialized";
   }
@@ -416,6 +426,20 @@ void StereoVo::AdvancePose(const stages::Refinement& refined, double dt_s, Stere
   result->T_prev_camera = T_a_b;
   cov_kf_camera_ = ComposeCovariance(cov_kf_camera_, T_a_b, refined.covariance);
   T_kf_camera_ = T_kf_camera_ * T_a_b;
+}
+
+fl::Status StereoVo::AddOdometry(Utime utime, const Pose2& T_odom_base) {
+  return odometry_.Add(utime, T_odom_base);
+}
+
+bool StereoVo::OdometryMotion(Utime a, Utime b, Eigen::Isometry3d* T_a_b_camera) const {
+  if (!options_.use_odometry_prior || odometry_.empty()) return false;
+  Pose2 T_odom_a, T_odom_b;
+  if (!odometry_.Lookup(a, &T_odom_a).ok() || !odometry_.Lookup(b, &T_odom_b).ok()) return false;
+  const Eigen::Isometry3d& T_base_camera = calibration_.T_base_camera;
+  *T_a_b_camera = T_base_camera.inverse() * T_odom_a.between(T_odom_b).ToIsometry3() *
+                  T_base_camera;
+  return true;
 }
 
 void StereoVo::AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int tracked_from_keyframe,

@@ -164,7 +164,10 @@ std::vector<ChannelSpec> StereoVoNode::Inputs() {
            "laser-aided mode (laser_depth.enabled, --laser-aided): multi-line scans; the one "
            "nearest each frame in time, received before it, gives features their depth"},
           {channels::kLaser3dToBase, "bot_core.rigid_transform_t",
-           "laser-aided mode: T_base_laser3d, the scanner's mounting (without it: plain stereo)"}};
+           "laser-aided mode: T_base_laser3d, the scanner's mounting (without it: plain stereo)"},
+          {channels::kOdometry, "fusionloc.wheel_odometry_t",
+           "use_odometry_prior: the motion prior of temporal matching and across gaps "
+           "(optional; without it, constant velocity)"}};
 }
 
 std::vector<ChannelSpec> StereoVoNode::Outputs() {
@@ -186,6 +189,7 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
       ch_points_(channels(channels::kVoPoints)),
       ch_laser_(channels(channels::kLaser3d)),
       ch_laser_to_base_(channels(channels::kLaser3dToBase)),
+      ch_odometry_(channels(channels::kOdometry)),
       status_(lcm, kProgram) {
   status_.SetState(fusionloc::status_t::LEVEL_STARTING, "waiting for " + ch_calib_);
   lcm_->Subscribe<fusionloc::stereo_calibration_t>(
@@ -197,6 +201,12 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
   lcm_->Subscribe<bot_core::images_t>(
       ch_stereo_, [this](const bot_core::images_t& m, const std::string&) { OnStereo(m); },
       LcmInterface::Duplicates::kDrop);
+  if (options_.use_odometry_prior) {
+    lcm_->Subscribe<fusionloc::wheel_odometry_t>(
+        ch_odometry_,
+        [this](const fusionloc::wheel_odometry_t& m, const std::string&) { OnOdometry(m); },
+        LcmInterface::Duplicates::kDrop);
+  }
   if (options_.laser_depth.enabled) {
     lcm_->Subscribe<fusionloc::laser_scan_3d_t>(
         ch_laser_,
@@ -205,6 +215,14 @@ StereoVoNode::StereoVoNode(const StereoVoOptions& options, LcmInterface* lcm,
     lcm_->Subscribe<bot_core::rigid_transform_t>(
         ch_laser_to_base_,
         [this](const bot_core::rigid_transform_t& m, const std::string&) { OnLaserToBase(m); });
+  }
+}
+
+void StereoVoNode::OnOdometry(const fusionloc::wheel_odometry_t& msg) {
+  status_.CountIn(ch_odometry_, msg.utime);
+  if (!vo_) return;  // a prior only: nothing to predict before the VO runs
+  if (const Status s = vo_->AddOdometry(msg.utime, Pose2(msg.x, msg.y, msg.theta)); !s.ok()) {
+    status_.CountDropped(ch_odometry_ + ": " + s.message());
   }
 }
 
@@ -345,6 +363,7 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
     case TrackingState::kInitialized:
     case TrackingState::kTracked:
       ++tracked_;
+      if (r.stats.odometry_prior) ++odometry_prior_frames_;
       status_.SetState(fusionloc::status_t::LEVEL_OK, r.message);
       if (r.new_segment) FL_LOG(WARN) << r.message;
       lcm_->Publish(ch_pose_, PoseToLcm(r.utime, r.T_world_base), stamp);
@@ -364,6 +383,9 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
   status_.Set("tracked", static_cast<double>(tracked_));
   status_.Set("not_tracked", static_cast<double>(not_tracked_));
   status_.Set("keyframes", static_cast<double>(keyframes_));
+  if (options_.use_odometry_prior) {
+    status_.Set("odometry_prior_frames", static_cast<double>(odometry_prior_frames_));
+  }
   status_.Set("inliers", r.stats.inliers);
   status_.Set("features_left", r.stats.features_left);
   status_.Set("segment", r.segment);
@@ -384,6 +406,9 @@ std::string StereoVoNode::Summary() const {
   return "frames " + std::to_string(frames_) + ", tracked " + std::to_string(tracked_) +
          ", not tracked " + std::to_string(not_tracked_) + ", keyframes " +
          std::to_string(keyframes_) + ", dropped " + std::to_string(status_.dropped()) +
+         (options_.use_odometry_prior
+              ? ", predicted by odometry " + std::to_string(odometry_prior_frames_)
+              : "") +
          (options_.laser_depth.enabled
               ? ", laser-aided " + std::to_string(laser_frames_) + " (plain stereo " +
                     std::to_string(laser_fallback_frames_) + ")"

@@ -26,6 +26,7 @@
 #include "fusionloc/relative_pose_factor_t.hpp"
 #include "fusionloc/stereo_calibration_t.hpp"
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
+#include "fusionloc/wheel_odometry_t.hpp"
 
 namespace fl::vo {
 
@@ -76,6 +77,8 @@ class StereoVoNode : public LcmNode {
   // changes (the periodic repeats do not).
   void StartOrRestart();
   void OnStereo(const bot_core::images_t& msg);
+  // use_odometry_prior: hands the wheel odometry to the VO as its motion prior.
+  void OnOdometry(const fusionloc::wheel_odometry_t& msg);
   // Laser-aided mode: keeps the latest scans (kLaserScansKept) and the scanner's mounting.
   void OnLaserScan(const fusionloc::laser_scan_3d_t& msg);
   void OnLaserToBase(const bot_core::rigid_transform_t& msg);
@@ -86,13 +89,14 @@ class StereoVoNode : public LcmNode {
   StereoVoOptions options_;
   LcmInterface* lcm_;
   std::string ch_stereo_, ch_calib_, ch_camera_to_base_, ch_pose_, ch_factors_, ch_points_;
-  std::string ch_laser_, ch_laser_to_base_;
+  std::string ch_laser_, ch_laser_to_base_, ch_odometry_;
   std::optional<fusionloc::stereo_calibration_t> intrinsics_;
   std::optional<bot_core::rigid_transform_t> camera_to_base_;
   StatusReporter status_;
   std::unique_ptr<StereoVo> vo_;
   StereoCalibration active_calibration_;
   int64_t frames_ = 0, tracked_ = 0, not_tracked_ = 0, keyframes_ = 0;
+  int64_t odometry_prior_frames_ = 0;  // tracked with the wheel odometry's prediction
   // Laser-aided mode.
   static constexpr size_t kLaserScansKept = 3;
   std::deque<fusionloc::laser_scan_3d_t> laser_scans_;  // latest first
