@@ -350,6 +350,14 @@ TEST(StereoVoOptionsTest, ConfigFileLoadsAndDefaultsValidate) {
   EXPECT_EQ(o.features.fast_threshold, StereoVoOptions().features.fast_threshold);
   EXPECT_EQ(o.estimate_disparity_offset, StereoVoOptions().estimate_disparity_offset);
   EXPECT_EQ(o.disparity_offset_drift_px, StereoVoOptions().disparity_offset_drift_px);
+  EXPECT_EQ(o.use_odometry_prior, StereoVoOptions().use_odometry_prior);
+  // The 10 Hz variant changes only what it says.
+  const StereoVoOptions fast =
+      fl::LoadYamlFile<StereoVoOptions>(fl::test::SourceDir() + "/config/stereo_vo_10hz.yaml");
+  EXPECT_TRUE(fast.Validate().ok());
+  EXPECT_TRUE(fast.use_odometry_prior);
+  EXPECT_EQ(fast.refine.covariance_scale, 10.0);
+  EXPECT_EQ(fast.keyframe_translation_m, o.keyframe_translation_m);
 }
 
 TEST(StereoVoOptionsTest, DisparityOffsetOptionsAreChecked) {
