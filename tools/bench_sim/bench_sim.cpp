@@ -155,7 +155,7 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options,
         ++out.vo_frames;
         if (r.state != fl::vo::TrackingState::kTracked && out.vo_frames > 1) {
           ++out.vo_lost;
-          ++out.vo_lost_reasons[LostReason(r.message)];
+          ++out.vo_lost_reasons[r.new_segment ? "new segment after a gap" : LostReason(r.message)];
         }
         if (r.pose_valid) {
           out.vo.push_back({r.utime, fl::Pose2::FromIsometry3(r.T_world_base).ToIsometry3()});
