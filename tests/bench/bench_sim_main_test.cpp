@@ -39,6 +39,26 @@ TEST(BenchSimMain, EveryEstimateIsReadAgainstTheWheelOdometry) {
   EXPECT_TRUE(std::filesystem::exists(dir.file("png/sim_paper_errors.png")));
 }
 
+// --camera-rate-hz overrides the worlds' camera rate and records a benchmark of its own; the VO
+// row counts the frames it did not track.
+TEST(BenchSimMain, CameraRateOverrideIsItsOwnBenchmark) {
+  TempDir dir;
+  const auto r = RunCommand(BinDir() + "/fl-bench-sim --worlds paper --duration 4 --config-dir " +
+                                SourceDir() + "/config --camera-rate-hz 5 --json out.json " +
+                                "--png-dir png",
+                            dir);
+  ASSERT_EQ(r.status, 0) << r.out << r.err;
+  const std::string json = fl::test::ReadFile(dir.file("out.json"));
+  EXPECT_NE(json.find("sim-camera-5hz"), std::string::npos) << json;
+  // 4 s at 5 Hz: 21 frames (2 Hz would give 9), each with a VO pose.
+  EXPECT_EQ(BenchMetric(json, "paper_vo_only", "items"), 21) << json;
+  EXPECT_EQ(BenchMetric(json, "paper_vo_only", "lost_frames"), 0) << json;
+  const auto bad = RunCommand(BinDir() + "/fl-bench-sim --worlds paper --camera-rate-hz -1",
+                              dir);
+  EXPECT_EQ(bad.status, 2);
+  EXPECT_NE((bad.out + bad.err).find("--camera-rate-hz"), std::string::npos) << bad.err;
+}
+
 TEST(BenchSimMain, AMissingWorldIsAnErrorNamingItsFile) {
   TempDir dir;
   const auto r = RunCommand(BinDir() + "/fl-bench-sim --worlds nowhere --config-dir " +
