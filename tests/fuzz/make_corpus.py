@@ -324,6 +324,11 @@ def main():
         write("stereo_vo_node", "laser-aided.bin",
               record(1, calib().encode()) + record(2, rigid(0.0).encode()) + record(4, rigid(0.0).encode()) +
               b"".join(record(3, scan3d(k).encode()) + record(0, stereo(k).encode()) for k in range(3)))
+        # stereo_vo_node with the odometry prior: ODOMETRY (5) before each frame, one out of order.
+        write("stereo_vo_node", "odometry-prior.bin",
+              record(1, calib().encode()) + record(2, rigid(0.0).encode()) +
+              b"".join(record(5, odom(k).encode()) + record(0, stereo(k).encode()) for k in range(3)) +
+              record(5, odom(1).encode()))
         write("stereo_vo_node", "stereo-before-calib.bin",
               record(0, stereo(0, 32, 24).encode()) + record(1, calib(32, 24).encode()) + record(0, stereo(1, 32, 24).encode()))
         write("fusion_node", "poses-factors.bin",
