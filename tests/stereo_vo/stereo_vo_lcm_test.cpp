@@ -22,6 +22,14 @@
 namespace fl::vo {
 namespace {
 
+// The value of `key` in a status message; NaN when absent.
+double StatusValue(const fusionloc::status_t& s, const std::string& key) {
+  for (int k = 0; k < s.num_keys; ++k) {
+    if (s.keys[static_cast<size_t>(k)] == key) return s.values[static_cast<size_t>(k)];
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
 bot_core::image_t MakeImage(const cv::Mat& gray, int stride_pad = 0) {
   bot_core::image_t im{};
   im.width = gray.cols;
@@ -201,13 +209,7 @@ TEST(StereoVoLcm, ProcessReplaysALog) {
   // unrectified calibration and the wrong size; the repeated frame (the same bytes) is a
   // duplicate, dropped by the LCM layer and counted apart.
   EXPECT_EQ(last_status.messages_dropped, 4);
-  double duplicates = -1;
-  for (int k = 0; k < last_status.num_keys; ++k) {
-    if (last_status.keys[static_cast<size_t>(k)] == "lcm_duplicates_dropped") {
-      duplicates = last_status.values[static_cast<size_t>(k)];
-    }
-  }
-  EXPECT_EQ(duplicates, 1);
+  EXPECT_EQ(StatusValue(last_status, "lcm_duplicates_dropped"), 1);
   EXPECT_TRUE(saw_rectified_error) << "status should report the unrectified calibration";
 }
 
@@ -254,15 +256,9 @@ TEST(StereoVoLcm, ProcessUsesTheOdometryPrior) {
       ASSERT_EQ(last_status.decode(ev.data.data(), 0, size), size);
     }
   }
-  double predicted = -1;
-  for (int k = 0; k < last_status.num_keys; ++k) {
-    if (last_status.keys[static_cast<size_t>(k)] == "odometry_prior_frames") {
-      predicted = last_status.values[static_cast<size_t>(k)];
-    }
-  }
   // Frames 1..9 are tracked and predicted, but frame 5: when it arrives the odometry ends at
   // frame 4's time (the odometry is interpolated, never extrapolated).
-  EXPECT_EQ(predicted, 8);
+  EXPECT_EQ(StatusValue(last_status, "odometry_prior_frames"), 8);
   EXPECT_EQ(last_status.messages_dropped, 1);  // the NaN sample
 }
 

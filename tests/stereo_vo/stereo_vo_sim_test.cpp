@@ -13,15 +13,20 @@
 namespace fl::vo {
 namespace {
 
+// The simulator's default world with the camera only (no laser), for `duration_s` at `rate_hz`.
+fl::sim::SimOptions CameraOnly(double duration_s, double rate_hz) {
+  fl::sim::SimOptions o;
+  o.duration_s = duration_s;
+  o.camera.rate_hz = rate_hz;
+  o.laser.enabled = false;
+  return o;
+}
+
 TEST(StereoVoSim, ShortSimulatedSequenceDriftsLessThanOnePercent) {
-  fl::sim::SimOptions sim_opts;
   // 12 s of the paper route: a straight run and the start of the first turn. The camera runs
   // at 5 Hz: at the paper's 2 Hz, the 0.8 rad/s turns rotate the view by 23 deg per frame,
   // which the VO does not track (see docs/STEREO_VO.md).
-  sim_opts.duration_s = 12.0;
-  sim_opts.camera.rate_hz = 5.0;
-  sim_opts.laser.enabled = false;
-  fl::sim::Simulator sim(sim_opts);
+  fl::sim::Simulator sim(CameraOnly(12.0, 5.0));
   std::unique_ptr<StereoVo> vo;
   fl::sim::SimFrame frame;
   Eigen::Isometry3d T_world_base0 = Eigen::Isometry3d::Identity();
@@ -77,11 +82,7 @@ TEST(StereoVoSim, EstimatesAnInjectedDisparityOffset) {
   const double delta = -0.4;  // [px]
   double scale[2] = {0, 0}, final_offset = 0, final_sd = 0;
   for (int estimate = 0; estimate < 2; ++estimate) {
-    fl::sim::SimOptions sim_opts;
-    sim_opts.duration_s = 5.0;
-    sim_opts.camera.rate_hz = 5.0;
-    sim_opts.laser.enabled = false;
-    fl::sim::Simulator sim(sim_opts);
+    fl::sim::Simulator sim(CameraOnly(5.0, 5.0));
     StereoVoOptions opts;
     opts.estimate_disparity_offset = estimate == 1;
     std::unique_ptr<StereoVo> vo;
@@ -147,11 +148,7 @@ TEST(StereoVoSim, TheOdometryPriorKeepsTheHeadingThroughTheTurnsAtTwoHertz) {
   int lost[2] = {0, 0};
   double yaw_error_deg[2] = {0, 0};
   for (int prior = 0; prior < 2; ++prior) {
-    fl::sim::SimOptions sim_opts;
-    sim_opts.duration_s = 60.0;  // the first straights and turns
-    sim_opts.camera.rate_hz = 2.0;
-    sim_opts.laser.enabled = false;
-    fl::sim::Simulator sim(sim_opts);
+    fl::sim::Simulator sim(CameraOnly(60.0, 2.0));  // the first straights and turns
     StereoVoOptions opts;
     opts.use_odometry_prior = prior == 1;
     std::unique_ptr<StereoVo> vo;
