@@ -10,6 +10,7 @@
 #include <random>
 #include <vector>
 
+#include "fusionloc/stereo_vo/local_ba.hpp"
 #include "fusionloc/stereo_vo/motion.hpp"
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
 
@@ -172,6 +173,46 @@ inline Eigen::Isometry3d MakeMotion(double rx, double ry, double rz, double tx, 
                    .toRotationMatrix();
   T.translation() = Eigen::Vector3d(tx, ty, tz);
   return T;
+}
+
+// A keyframe window for the local bundle adjustment: n keyframes of a rig driving forward
+// (camera z) step_m per keyframe while turning yaw_step_rad (about camera y), and `points`
+// random points (track id = index) observed with Gaussian pixel noise by every keyframe that
+// sees them in a 640x480 image between 2 and 60 m. *truth: the true T_world_camera per keyframe
+// (the first is the world frame); the window's poses are the truth.
+inline std::vector<fl::vo::BaKeyframe> MakeKeyframeWindow(const fl::vo::StereoCamera& cam, int n,
+                                                          int points, double step_m,
+                                                          double yaw_step_rad, double noise_px,
+                                                          uint32_t seed,
+                                                          std::vector<Eigen::Isometry3d>* truth) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> ux(-15, 15), uy(-3, 2), uz(3, 45);
+  std::normal_distribution<double> noise(0.0, noise_px > 0 ? noise_px : 1.0);
+  auto nz = [&]() { return noise_px > 0 ? noise(rng) : 0.0; };
+  truth->clear();
+  std::vector<fl::vo::BaKeyframe> window(static_cast<size_t>(n));
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  for (int k = 0; k < n; ++k) {
+    truth->push_back(T);
+    window[static_cast<size_t>(k)].id = k;
+    window[static_cast<size_t>(k)].utime = 1000000 + k * 100000;
+    window[static_cast<size_t>(k)].T_world_camera = T;
+    T = T * MakeMotion(0.0, yaw_step_rad, 0.0, 0.0, 0.0, step_m);
+  }
+  for (int i = 0; i < points; ++i) {
+    const Eigen::Vector3d p_world(ux(rng), uy(rng), uz(rng));
+    for (int k = 0; k < n; ++k) {
+      const Eigen::Vector3d p_k = (*truth)[static_cast<size_t>(k)].inverse() * p_world;
+      Eigen::Vector3d uvu;
+      if (p_k.z() < 2.0 || p_k.z() > 60.0 || !cam.Project(p_k, &uvu)) continue;
+      if (uvu(0) < 0 || uvu(0) > 639 || uvu(1) < 0 || uvu(1) > 479 || uvu(2) < 0) continue;
+      fl::vo::BaObservation o;
+      o.track_id = i;
+      o.uvu = uvu + Eigen::Vector3d(nz(), nz(), nz());
+      window[static_cast<size_t>(k)].observations.push_back(o);
+    }
+  }
+  return window;
 }
 
 }  // namespace fl::test::stereo

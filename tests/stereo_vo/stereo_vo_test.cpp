@@ -351,6 +351,10 @@ TEST(StereoVoOptionsTest, ConfigFileLoadsAndDefaultsValidate) {
   EXPECT_EQ(o.estimate_disparity_offset, StereoVoOptions().estimate_disparity_offset);
   EXPECT_EQ(o.disparity_offset_drift_px, StereoVoOptions().disparity_offset_drift_px);
   EXPECT_EQ(o.use_odometry_prior, StereoVoOptions().use_odometry_prior);
+  EXPECT_EQ(o.local_ba.enabled, StereoVoOptions().local_ba.enabled);
+  EXPECT_EQ(o.local_ba.window_keyframes, StereoVoOptions().local_ba.window_keyframes);
+  EXPECT_EQ(o.local_ba.motion_prior_covariance_scale,
+            StereoVoOptions().local_ba.motion_prior_covariance_scale);
   // The 10 Hz variant changes only what it says.
   const StereoVoOptions fast =
       fl::LoadYamlFile<StereoVoOptions>(fl::test::SourceDir() + "/config/stereo_vo_10hz.yaml");

@@ -126,6 +126,7 @@ fl::Status StereoVoOptions::Validate() const {
     return fl::Status::Error("max_speed_mps and max_gap_s must be > 0");
   }
   if (auto s = laser_depth.Validate(); !s.ok()) return s;
+  if (auto s = local_ba.Validate(); !s.ok()) return s;
   if (!(laser_max_time_offset_s >= 0)) {
     return fl::Status::Error("laser_max_time_offset_s must be >= 0");
   }
@@ -369,6 +370,7 @@ StereoVoResult StereoVo::Initialize(std::unique_ptr<stages::StereoFrame> frame,
   }
   initialized_ = true;
   velocity_dt_s_ = 0;
+  ba_window_.clear();  // no factor links the segments: neither does the window
   stages::AssignNewTracks(frame.get(), &next_track_id_);
   StartKeyframe(*frame, &result);
   result.state = TrackingState::kInitialized;
@@ -387,6 +389,18 @@ void StereoVo::StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* r
   keyframe_tracks_ = -1;  // set by the next tracked frame (AddKeyframeFactorIfDue)
   stages::KeyframePoints(camera_, frame, offset_px_, &result->keyframe_points,
                          &result->keyframe_intensities);
+  if (options_.local_ba.enabled) {
+    BaKeyframe kf;
+    kf.id = keyframe_id_;
+    kf.utime = frame.utime;
+    kf.T_world_camera = T_world_camera_;
+    kf.observations = stages::KeyframeObservations(camera_, frame, offset_px_);
+    ba_window_.push_back(std::move(kf));
+    const size_t window = static_cast<size_t>(options_.local_ba.window_keyframes);
+    if (ba_window_.size() > window) {
+      ba_window_.erase(ba_window_.begin(), ba_window_.end() - static_cast<long>(window));
+    }
+  }
 }
 
 double StereoVo::PredictedOffsetVariance(Utime utime) const {
@@ -454,9 +468,54 @@ void StereoVo::AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int trac
   f.utime_i = keyframe_utime_;
   f.utime_j = frame.utime;
   f.keyframe_id_i = keyframe_id_;
+  const Eigen::Isometry3d T_chain = T_kf_camera_;
+  const Eigen::Matrix<double, 6, 6> cov_chain = cov_kf_camera_;
   StartKeyframe(frame, result);
   f.keyframe_id_j = keyframe_id_;
+  if (options_.local_ba.enabled) {
+    // The chained motion from the previous keyframe: the window's motion prior.
+    BaKeyframe& kf = ba_window_.back();
+    kf.has_motion = ba_window_.size() >= 2;
+    kf.T_prev_camera = T_chain;
+    kf.motion_covariance = cov_chain;
+    AdjustWindow(&f, result);
+  }
   if (f.information.allFinite()) result->factor = f;
+}
+
+bool StereoVo::AdjustWindow(KeyframeFactor* factor, StereoVoResult* result) {
+  const double t0 = NowMs();
+  const LocalBaResult ba =
+      LocalBundleAdjustment(camera_, ba_window_, options_.local_ba, pixel_sigma_px_);
+  FrameStats& stats = result->stats;
+  stats.ms_ba = NowMs() - t0;
+  stats.ba_points = ba.points;
+  stats.ba_observations = ba.observations;
+  stats.ba_outliers = ba.outliers;
+  stats.ba_rms_px = ba.final_rms_px;
+  if (!ba.ok) {
+    result->message = "local BA not applied: " + ba.message;
+    return false;
+  }
+  stats.local_ba = true;
+  const size_t n = ba_window_.size();
+  for (size_t k = 0; k < n; ++k) ba_window_[k].T_world_camera = ba.T_world_camera[k];
+  T_world_camera_ = ba.T_world_camera[n - 1];
+  const Eigen::Isometry3d T_i_j = ba.T_world_camera[n - 2].inverse() * ba.T_world_camera[n - 1];
+  // Without the window's covariance (rank deficient), the chained one (the factor's, back in
+  // the camera frame).
+  const Eigen::Isometry3d& T_base_camera = calibration_.T_base_camera;
+  const Eigen::Matrix<double, 6, 6> cov =
+      ba.covariance_ok
+          ? Eigen::Matrix<double, 6, 6>(options_.refine.covariance_scale * ba.covariance_last)
+          : ChangeFrameCovariance(factor->covariance, T_base_camera.inverse());
+  KeyframeFactor f = stages::MakeKeyframeFactor(T_base_camera, T_i_j, cov);
+  f.utime_i = factor->utime_i;
+  f.utime_j = factor->utime_j;
+  f.keyframe_id_i = factor->keyframe_id_i;
+  f.keyframe_id_j = factor->keyframe_id_j;
+  *factor = f;
+  return true;
 }
 
 }  // namespace fl::vo

@@ -389,4 +389,19 @@ void KeyframePoints(const StereoCamera& camera, const StereoFrame& frame, double
   }
 }
 
+std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
+                                                const StereoFrame& frame, double offset_px) {
+  std::vector<BaObservation> out;
+  out.reserve(At(frame.stereo_matches));
+  for (int i = 0; i < frame.fl.size(); ++i) {
+    if (frame.stereo[At(i)] < 0 || frame.track_id[At(i)] < 0) continue;
+    const cv::Point2f pl = frame.fl.keypoints[At(i)].pt;
+    BaObservation o;
+    o.track_id = frame.track_id[At(i)];
+    o.uvu = {pl.x, pl.y, CorrectRightX(camera, frame.right_x[At(i)], offset_px)};
+    out.push_back(o);
+  }
+  return out;
+}
+
 }  // namespace fl::vo::stages

@@ -374,6 +374,7 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
       }
       if (r.is_keyframe) {
         ++keyframes_;
+        if (options_.local_ba.enabled && r.factor) ++(r.stats.local_ba ? ba_windows_ : ba_skipped_);
         lcm_->Publish(ch_points_, KeyframePointsToLcm(r), stamp);
         status_.CountOut();
       }
@@ -385,6 +386,15 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
   status_.Set("keyframes", static_cast<double>(keyframes_));
   if (options_.use_odometry_prior) {
     status_.Set("odometry_prior_frames", static_cast<double>(odometry_prior_frames_));
+  }
+  if (options_.local_ba.enabled) {
+    status_.Set("local_ba_windows", static_cast<double>(ba_windows_));
+    status_.Set("local_ba_skipped", static_cast<double>(ba_skipped_));
+    if (r.stats.local_ba) {
+      status_.Set("local_ba_points", r.stats.ba_points);
+      status_.Set("local_ba_rms_px", r.stats.ba_rms_px);
+      status_.Set("local_ba_ms", r.stats.ms_ba);
+    }
   }
   status_.Set("inliers", r.stats.inliers);
   status_.Set("features_left", r.stats.features_left);

@@ -1,6 +1,7 @@
-// Ceres cost functors of the fusion back-end: SE(2) prior, SE(3) between. The SE(2) between
+// Ceres cost functors of the fusion back-end: SE(2) prior. The SE(2) and SE(3) between
 // factor (laser eqs. 13-15, vision eqs. 17-19 reduced to the plane, wheel odometry) is
-// fl::Se2BetweenCost (fusionloc/common/se2_between_cost.hpp), shared with the RBPF.
+// fl::Se2BetweenCost and fl::Se3BetweenCost (fusionloc/common/), shared with the RBPF and the
+// stereo VO.
 //
 // Every factor's cost is d(e) = e^T Omega e (MSIF eqs. 11-12) written as a least-squares
 // residual r = S e with S^T S = Omega, so that Ceres' 1/2 |r|^2 = 1/2 d(e); S comes from
@@ -16,6 +17,7 @@
 #include <cmath>
 
 #include "fusionloc/common/se2_between_cost.hpp"
+#include "fusionloc/common/se3_between_cost.hpp"
 #include "fusionloc/common/sqrt_information.hpp"
 
 namespace fl::fusion {
@@ -89,53 +91,8 @@ class Se2PriorCost final : public ceres::SizedCostFunction<3, 3> {
   Eigen::Matrix3d sqrt_information_;
 };
 
-// SE(3) between factor (for 3D pose graphs, VERTEX_SE3:QUAT / EDGE_SE3:QUAT).
-// Parameter blocks: p_i (3), q_i (4, Eigen order x y z w, unit, EigenQuaternionManifold),
-// p_j (3), q_j (4). Measurement T_i_j = (p_ij, q_ij).
-//
-//   q_ij_est = q_i^-1 q_j,   p_ij_est = q_i^-1 (p_j - p_i)
-//   dq = q_ij * q_ij_est^-1
-//   e = [ p_ij_est - p_ij ; 2 vec(dq) ]   (metres in frame i; ~radians for small errors)
-//   r = S e,  S^T S = Omega (6x6, order x y z rx ry rz)
-//
-// Jacobians by automatic differentiation.
-class Se3BetweenCost {
- public:
-  Se3BetweenCost(const Eigen::Vector3d& p_ij, const Eigen::Quaterniond& q_ij,
-                 const Eigen::Matrix<double, 6, 6>& sqrt_information)
-      : p_ij_(p_ij), q_ij_(q_ij.normalized()), sqrt_information_(sqrt_information) {}
-
-  template <typename T>
-  bool operator()(const T* const p_i_ptr, const T* const q_i_ptr, const T* const p_j_ptr,
-                  const T* const q_j_ptr, T* residuals_ptr) const {
-    Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_i(p_i_ptr);
-    Eigen::Map<const Eigen::Quaternion<T>> q_i(q_i_ptr);
-    Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_j(p_j_ptr);
-    Eigen::Map<const Eigen::Quaternion<T>> q_j(q_j_ptr);
-    const Eigen::Quaternion<T> q_i_inv = q_i.conjugate();
-    const Eigen::Quaternion<T> q_ij_est = q_i_inv * q_j;
-    const Eigen::Matrix<T, 3, 1> p_ij_est = q_i_inv * (p_j - p_i);
-    const Eigen::Quaternion<T> dq = q_ij_.template cast<T>() * q_ij_est.conjugate();
-    Eigen::Matrix<T, 6, 1> e;
-    e.template head<3>() = p_ij_est - p_ij_.template cast<T>();
-    e.template tail<3>() = T(2.0) * dq.vec();
-    Eigen::Map<Eigen::Matrix<T, 6, 1>> r(residuals_ptr);
-    r = sqrt_information_.template cast<T>() * e;
-    return true;
-  }
-
-  static ceres::CostFunction* Create(const Eigen::Vector3d& p_ij, const Eigen::Quaterniond& q_ij,
-                                     const Eigen::Matrix<double, 6, 6>& sqrt_information) {
-    return new ceres::AutoDiffCostFunction<Se3BetweenCost, 6, 3, 4, 3, 4>(
-        new Se3BetweenCost(p_ij, q_ij, sqrt_information));
-  }
-
-  EIGEN_MAKE_ALIGNED_OPERATOR_NEW
-
- private:
-  Eigen::Vector3d p_ij_;
-  Eigen::Quaterniond q_ij_;
-  Eigen::Matrix<double, 6, 6> sqrt_information_;
-};
+// The SE(3) between factor is fl::Se3BetweenCost (fusionloc/common/se3_between_cost.hpp),
+// shared with the stereo VO's local bundle adjustment.
+using fl::Se3BetweenCost;
 
 }  // namespace fl::fusion

@@ -24,6 +24,7 @@
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
 #include "fusionloc/stereo_vo/laser_depth.hpp"
+#include "fusionloc/stereo_vo/local_ba.hpp"
 #include "fusionloc/stereo_vo/matching.hpp"
 #include "fusionloc/stereo_vo/motion.hpp"
 
@@ -102,6 +103,11 @@ struct StereoVoOptions {
   // stereo VO, unchanged.
   LaserDepthOptions laser_depth;
   double laser_max_time_offset_s = 0.05;  // [s] a scan farther in time from the images: unused
+  // Keyframe local bundle adjustment (local_ba.hpp): at every new keyframe the last
+  // local_ba.window_keyframes keyframes and their shared tracks are adjusted together; the
+  // adjusted newest keyframe pose continues the chain and the keyframe factor is the adjusted
+  // relative pose with the window's covariance. Off: the chained frame-to-frame motions.
+  LocalBaOptions local_ba;
   template <class A>
   void Serialize(A* a) {
     a->Visit("features", &features);
@@ -131,6 +137,7 @@ struct StereoVoOptions {
     a->Visit("use_odometry_prior", &use_odometry_prior);
     a->Visit("laser_depth", &laser_depth);
     a->Visit("laser_max_time_offset_s", &laser_max_time_offset_s);
+    a->Visit("local_ba", &local_ba);
   }
   fl::Status Validate() const;
 };
@@ -176,6 +183,13 @@ struct FrameStats {
   int laser_depth_prev = 0, laser_depth_cur = 0;
   int laser_depth_inconsistent = 0, laser_depth_disagrees = 0;
   double ms_laser = 0;  // [ms] projection and association
+  // Local bundle adjustment at this keyframe (local_ba.enabled): adjusted (false: not a
+  // keyframe, or the window could not be adjusted; then the message says why), its tracks,
+  // observations kept, observations dropped as outliers, reprojection RMS after [px], time.
+  bool local_ba = false;
+  int ba_points = 0, ba_observations = 0, ba_outliers = 0;
+  double ba_rms_px = 0;
+  double ms_ba = 0;
 };
 
 // A laser scan for the laser-aided mode: points already in the LEFT camera frame (the caller
@@ -251,6 +265,10 @@ class StereoVo {
                     StereoVoResult* result);
   void AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int tracked_from_keyframe,
                               StereoVoResult* result);
+  // Local BA over ba_window_ (the new keyframe is its last): moves the window's poses and the
+  // chain, and makes *factor the adjusted relative pose of the last two; false (factor and
+  // chain unchanged, result->message says why) if the window could not be adjusted.
+  bool AdjustWindow(KeyframeFactor* factor, StereoVoResult* result);
   // The camera's motion T_a_b from time a to b by the wheel odometry (use_odometry_prior and
   // samples around both times); false otherwise.
   bool OdometryMotion(Utime a, Utime b, Eigen::Isometry3d* T_a_b_camera) const;
@@ -278,6 +296,8 @@ class StereoVo {
   // -1 until that frame is tracked.
   int keyframe_tracks_ = -1;
   int64_t next_track_id_ = 0;
+  // Local BA: the last keyframes of this segment, oldest first (local_ba.enabled).
+  std::vector<BaKeyframe> ba_window_;
   // Disparity offset filter (scalar Kalman, random walk).
   double offset_px_ = 0;
   double offset_var_px2_ = 0;

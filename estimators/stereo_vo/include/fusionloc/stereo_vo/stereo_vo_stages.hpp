@@ -11,7 +11,8 @@
 //     RansacMotion (motion.hpp)    3-point SVD hypotheses
 //   RefineStage (+ SelectInliers)  bundle adjustment rounds with inlier re-selection
 //   PropagateTracks, AssignNewTracks
-//   NeedsKeyframe, MakeKeyframeFactor, KeyframePoints
+//   NeedsKeyframe, MakeKeyframeFactor, KeyframePoints, KeyframeObservations
+//   (local_ba.hpp: the keyframe window's bundle adjustment)
 #pragma once
 
 #include <Eigen/Core>
@@ -24,6 +25,7 @@
 
 #include "fusionloc/common/time.hpp"
 #include "fusionloc/stereo_vo/laser_depth.hpp"
+#include "fusionloc/stereo_vo/local_ba.hpp"
 #include "fusionloc/stereo_vo/matching.hpp"
 #include "fusionloc/stereo_vo/motion.hpp"
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
@@ -197,5 +199,9 @@ KeyframeFactor MakeKeyframeFactor(const Eigen::Isometry3d& T_base_camera,
 // The triangulated stereo matches of a keyframe (left camera frame) with their gray levels.
 void KeyframePoints(const StereoCamera& camera, const StereoFrame& frame, double offset_px,
                     std::vector<Eigen::Vector3f>* points, std::vector<float>* intensities);
+// The local bundle adjustment's observations of a keyframe: every stereo feature with a track
+// id, (u_left, v, u_right corrected by the disparity offset offset_px).
+std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
+                                                const StereoFrame& frame, double offset_px);
 
 }  // namespace fl::vo::stages

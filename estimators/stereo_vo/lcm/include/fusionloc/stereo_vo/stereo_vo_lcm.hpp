@@ -97,6 +97,7 @@ class StereoVoNode : public LcmNode {
   StereoCalibration active_calibration_;
   int64_t frames_ = 0, tracked_ = 0, not_tracked_ = 0, keyframes_ = 0;
   int64_t odometry_prior_frames_ = 0;  // tracked with the wheel odometry's prediction
+  int64_t ba_windows_ = 0, ba_skipped_ = 0;  // keyframes adjusted / not adjusted by the local BA
   // Laser-aided mode.
   static constexpr size_t kLaserScansKept = 3;
   std::deque<fusionloc::laser_scan_3d_t> laser_scans_;  // latest first

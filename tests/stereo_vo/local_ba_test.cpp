@@ -1,0 +1,236 @@
+// Keyframe local bundle adjustment (local_ba.hpp): track collection, the cost blocks'
+// Jacobians, the adjustment of a perturbed synthetic window, outliers, the covariance's
+// consistency, and the refusals.
+#include "fusionloc/stereo_vo/local_ba.hpp"
+
+#include <ceres/ceres.h>
+#include <ceres/gradient_checker.h>
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "fusionloc/common/geometry.hpp"
+#include "cost_fixtures.hpp"
+#include "stereo_fixtures.hpp"
+
+namespace fl::vo {
+namespace {
+
+using fl::test::stereo::MakeKeyframeWindow;
+using fl::test::stereo::MakeMotion;
+
+StereoCamera Cam() { return {500.0, 500.0, 319.5, 239.5, 0.5}; }
+
+double TransError(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return (a.translation() - b.translation()).norm();
+}
+double RotErrorDeg(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return fl::RotationAngle((a.inverse() * b).linear()) * 180.0 / M_PI;
+}
+
+// The window's poses but the first moved by a random error of about trans_m and rot_deg.
+void Perturb(std::vector<BaKeyframe>* window, double trans_m, double rot_deg, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const double r = rot_deg * M_PI / 180.0;
+  for (size_t k = 1; k < window->size(); ++k) {
+    (*window)[k].T_world_camera =
+        (*window)[k].T_world_camera * MakeMotion(r * n(rng), r * n(rng), r * n(rng),
+                                                 trans_m * n(rng), trans_m * n(rng),
+                                                 trans_m * n(rng));
+  }
+}
+
+TEST(StereoVoLocalBa, CollectTracksKeepsSharedTracksTriangulatedWhereTheDisparityIsLargest) {
+  const StereoCamera cam = Cam();
+  std::vector<BaKeyframe> window(3);
+  for (int k = 0; k < 3; ++k) {
+    window[k].T_world_camera = MakeMotion(0, 0, 0, 0, 0, 1.0 * k);  // 1 m forward per keyframe
+  }
+  const Eigen::Vector3d p_world(1.0, 0.5, 12.0);
+  for (int k = 0; k < 3; ++k) {
+    Eigen::Vector3d uvu;
+    ASSERT_TRUE(cam.Project(window[k].T_world_camera.inverse() * p_world, &uvu));
+    window[k].observations.push_back({7, uvu});
+  }
+  window[0].observations.push_back({8, {300, 200, 290}});  // seen once: not shared
+  window[1].observations.push_back({9, {300, 200, 301}});  // negative disparity: skipped
+  window[2].observations.push_back({9, {300, 200, 290}});
+  const std::vector<BaTrack> tracks = CollectTracks(cam, window, 2);
+  ASSERT_EQ(tracks.size(), 1u);
+  EXPECT_EQ(tracks[0].track_id, 7);
+  EXPECT_EQ(tracks[0].observations.size(), 3u);
+  EXPECT_LT((tracks[0].p_o - p_world).norm(), 1e-9);  // frame o = keyframe 0 = world here
+  EXPECT_EQ(CollectTracks(cam, window, 3).size(), 1u);
+}
+
+TEST(StereoVoLocalBa, ResidualBlocksPassTheGradientChecker) {
+  const StereoCamera cam = Cam();
+  std::vector<Eigen::Isometry3d> truth;
+  std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 4, 40, 1.0, 0.05, 0.3, 3, &truth);
+  Perturb(&window, 0.05, 0.5, 4);
+  const std::vector<BaTrack> tracks = CollectTracks(cam, window, 2);
+  ASSERT_GE(tracks.size(), 20u);
+  BaState state = InitialState(window, tracks);
+  // A non-zero perturbation to probe at.
+  for (size_t k = 1; k < state.delta.size(); ++k) state.delta[k] = {0.01, -0.02, 0.03, 0.002, -0.003, 0.001};
+  ceres::Problem problem;
+  BuildProblem(cam, window, tracks, LocalBaOptions(), {}, &state, &problem);
+  std::vector<ceres::ResidualBlockId> blocks;
+  problem.GetResidualBlocks(&blocks);
+  ASSERT_GT(blocks.size(), 40u);
+  int checked_a = 0, checked_b = 0;
+  for (ceres::ResidualBlockId id : blocks) {
+    std::vector<double*> params;
+    problem.GetParameterBlocksForResidualBlock(id, &params);
+    const ceres::CostFunction* cost = problem.GetCostFunctionForResidualBlock(id);
+    const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
+    ceres::GradientChecker checker(cost, no_manifolds, fl::test::CheckerOptions());
+    ceres::GradientChecker::ProbeResults results;
+    EXPECT_TRUE(checker.Probe(params.data(), 1e-6, &results)) << results.error_log;
+    ++(params.size() == 1 ? checked_a : checked_b);
+  }
+  EXPECT_GT(checked_a, 0);  // keyframe 0 (point only)
+  EXPECT_GT(checked_b, 0);  // the others (rho, phi, point)
+}
+
+TEST(StereoVoLocalBa, ReducesTheErrorOfAPerturbedWindow) {
+  const StereoCamera cam = Cam();
+  for (uint32_t seed : {1u, 2u, 3u}) {
+    std::vector<Eigen::Isometry3d> truth;
+    std::vector<BaKeyframe> window =
+        MakeKeyframeWindow(cam, 6, 300, 1.0, 0.04, 0.3, seed, &truth);
+    Perturb(&window, 0.10, 1.0, seed + 100);
+    double before_t = 0, before_r = 0;
+    for (size_t k = 1; k < window.size(); ++k) {
+      before_t = std::max(before_t, TransError(window[k].T_world_camera, truth[k]));
+      before_r = std::max(before_r, RotErrorDeg(window[k].T_world_camera, truth[k]));
+    }
+    const LocalBaResult r = LocalBundleAdjustment(cam, window, LocalBaOptions(), 0.3);
+    ASSERT_TRUE(r.ok) << r.message;
+    EXPECT_LT(r.final_rms_px, 0.4);
+    EXPECT_GT(r.initial_rms_px, 3.0);
+    EXPECT_TRUE(r.covariance_ok);
+    double after_t = 0, after_r = 0;
+    for (size_t k = 1; k < window.size(); ++k) {
+      after_t = std::max(after_t, TransError(r.T_world_camera[k], truth[k]));
+      after_r = std::max(after_r, RotErrorDeg(r.T_world_camera[k], truth[k]));
+    }
+    EXPECT_EQ(r.T_world_camera[0].matrix(), window[0].T_world_camera.matrix());  // the gauge
+    EXPECT_LT(after_t, 0.02) << "seed " << seed << ", before " << before_t << " m";
+    EXPECT_LT(after_r, 0.05) << "seed " << seed << ", before " << before_r << " deg";
+    EXPECT_LT(after_t, 0.2 * before_t);
+  }
+}
+
+TEST(StereoVoLocalBa, DropsOutlierObservations) {
+  const StereoCamera cam = Cam();
+  std::vector<Eigen::Isometry3d> truth;
+  std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 5, 300, 1.0, 0.04, 0.3, 11, &truth);
+  // Every tenth observation of the last keyframe moved by 15 px (a wrong track).
+  int wrong = 0;
+  for (size_t i = 0; i < window.back().observations.size(); i += 10, ++wrong) {
+    window.back().observations[i].uvu += Eigen::Vector3d(15, -10, 15);
+  }
+  Perturb(&window, 0.05, 0.5, 12);
+  const LocalBaResult r = LocalBundleAdjustment(cam, window, LocalBaOptions(), 0.3);
+  ASSERT_TRUE(r.ok) << r.message;
+  // A track seen twice cannot tell which of its two observations is wrong: both may go.
+  EXPECT_GE(r.outliers, wrong * 9 / 10);
+  EXPECT_LE(r.outliers, 2 * wrong + 5);
+  EXPECT_LT(TransError(r.T_world_camera.back(), truth.back()), 0.02);
+  EXPECT_LT(r.final_rms_px, 0.4);
+}
+
+TEST(StereoVoLocalBa, TheMotionPriorCarriesWhatTheChainMeasured) {
+  // Few shared tracks (25 points, 1.5 px noise): the reprojections alone leave the poses a few
+  // centimetres off; the chained motions (here the true ones, 1 mm / 0.03 deg) hold them.
+  const StereoCamera cam = Cam();
+  std::vector<Eigen::Isometry3d> truth;
+  std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 5, 25, 1.0, 0.04, 1.5, 21, &truth);
+  for (size_t k = 1; k < window.size(); ++k) {
+    window[k].has_motion = true;
+    window[k].T_prev_camera = truth[k - 1].inverse() * truth[k];
+    window[k].motion_covariance.diagonal() << 1e-6, 1e-6, 1e-6, 3e-7, 3e-7, 3e-7;
+  }
+  Perturb(&window, 0.05, 0.5, 22);
+  LocalBaOptions options;
+  options.min_points = 10;
+  options.motion_prior_covariance_scale = 1.0;
+  double error[2] = {0, 0};
+  for (int prior = 0; prior < 2; ++prior) {
+    options.motion_prior = prior == 1;
+    const LocalBaResult r = LocalBundleAdjustment(cam, window, options, 1.5);
+    ASSERT_TRUE(r.ok) << r.message;
+    for (size_t k = 1; k < window.size(); ++k) {
+      error[prior] = std::max(error[prior], TransError(r.T_world_camera[k], truth[k]));
+    }
+  }
+  EXPECT_LT(error[1], 0.005);
+  EXPECT_LT(error[1], 0.5 * error[0]) << "without the prior " << error[0] << " m";
+}
+
+TEST(StereoVoLocalBa, TheRelativeCovarianceMatchesTheScatterOverNoiseDraws) {
+  // chi^2 of the newest relative pose's error under the predicted covariance, averaged over
+  // noise draws: 6 (its dimension) if the covariance is right.
+  const StereoCamera cam = Cam();
+  const double sigma_px = 0.5;
+  double chi2_sum = 0;
+  const int draws = 40;
+  for (int d = 0; d < draws; ++d) {
+    std::vector<Eigen::Isometry3d> truth;
+    const std::vector<BaKeyframe> window =
+        MakeKeyframeWindow(cam, 4, 150, 1.0, 0.04, sigma_px, 500 + d, &truth);
+    LocalBaOptions options;
+    options.huber_px = 100;  // Gaussian noise, no outliers: plain least squares
+    const LocalBaResult r = LocalBundleAdjustment(cam, window, options, sigma_px);
+    ASSERT_TRUE(r.ok && r.covariance_ok) << r.message;
+    const size_t n = window.size();
+    const Eigen::Isometry3d T_est = r.T_world_camera[n - 2].inverse() * r.T_world_camera[n - 1];
+    const Eigen::Isometry3d T_true = truth[n - 2].inverse() * truth[n - 1];
+    const Eigen::Isometry3d E = T_true.inverse() * T_est;  // T_est = T_true Exp(e)
+    Eigen::Matrix<double, 6, 1> e;
+    const Eigen::AngleAxisd aa(E.linear());
+    e << E.translation(), aa.angle() * aa.axis();
+    chi2_sum += e.dot(r.covariance_last.ldlt().solve(e));
+  }
+  const double chi2_mean = chi2_sum / draws;
+  EXPECT_GT(chi2_mean, 6.0 * 0.6);
+  EXPECT_LT(chi2_mean, 6.0 * 1.6);
+}
+
+TEST(StereoVoLocalBa, RefusesWindowsItCannotAdjust) {
+  const StereoCamera cam = Cam();
+  std::vector<Eigen::Isometry3d> truth;
+  std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 3, 10, 1.0, 0.0, 0.3, 5, &truth);
+  LocalBaResult r = LocalBundleAdjustment(cam, window, LocalBaOptions(), 0.3);
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.message.find("min_points"), std::string::npos) << r.message;
+  ASSERT_EQ(r.T_world_camera.size(), window.size());  // the poses unchanged
+  EXPECT_EQ(r.T_world_camera[2].matrix(), window[2].T_world_camera.matrix());
+  r = LocalBundleAdjustment(cam, {window[0]}, LocalBaOptions(), 0.3);
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.message.find("2 keyframes"), std::string::npos) << r.message;
+}
+
+TEST(StereoVoLocalBa, OptionsValidate) {
+  EXPECT_TRUE(LocalBaOptions().Validate().ok());
+  LocalBaOptions o;
+  o.window_keyframes = 1;
+  EXPECT_FALSE(o.Validate().ok());
+  o = LocalBaOptions();
+  o.min_track_keyframes = o.window_keyframes + 1;
+  EXPECT_FALSE(o.Validate().ok());
+  o = LocalBaOptions();
+  o.huber_px = 0;
+  EXPECT_FALSE(o.Validate().ok());
+  o = LocalBaOptions();
+  o.min_points = 2;
+  EXPECT_FALSE(o.Validate().ok());
+  o = LocalBaOptions();
+  o.motion_prior_covariance_scale = 0;
+  EXPECT_FALSE(o.Validate().ok());
+}
+
+}  // namespace
+}  // namespace fl::vo
