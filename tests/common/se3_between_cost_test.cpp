@@ -62,8 +62,8 @@ TEST(Se3BetweenCost, ErrorCovarianceMapsARightPerturbation) {
   const Eigen::Vector3d p_i(1, 2, 3), p_ij(2.0, -0.5, 0.3);
   Eigen::Matrix<double, 6, 1> delta;
   delta << 1e-5, -2e-5, 3e-5, 2e-5, 1e-5, -3e-5;
-  const Eigen::Quaterniond q_d(Eigen::AngleAxisd(delta.tail<3>().norm(),
-                                                 delta.tail<3>().normalized()));
+  const Eigen::Quaterniond q_d(
+      Eigen::AngleAxisd(delta.tail<3>().norm(), delta.tail<3>().normalized()));
   const Eigen::Quaterniond q_est = q_ij * q_d;
   const Eigen::Vector3d p_est = p_ij + q_ij * delta.head<3>();
   const Eigen::Vector3d p_j = p_i + q_i * p_est;

@@ -9,8 +9,8 @@
 
 #include <random>
 
-#include "fusionloc/common/geometry.hpp"
 #include "cost_fixtures.hpp"
+#include "fusionloc/common/geometry.hpp"
 #include "stereo_fixtures.hpp"
 
 namespace fl::vo {
@@ -34,10 +34,9 @@ void Perturb(std::vector<BaKeyframe>* window, double trans_m, double rot_deg, ui
   std::normal_distribution<double> n(0.0, 1.0);
   const double r = rot_deg * M_PI / 180.0;
   for (size_t k = 1; k < window->size(); ++k) {
-    (*window)[k].T_world_camera =
-        (*window)[k].T_world_camera * MakeMotion(r * n(rng), r * n(rng), r * n(rng),
-                                                 trans_m * n(rng), trans_m * n(rng),
-                                                 trans_m * n(rng));
+    (*window)[k].T_world_camera = (*window)[k].T_world_camera *
+                                  MakeMotion(r * n(rng), r * n(rng), r * n(rng), trans_m * n(rng),
+                                             trans_m * n(rng), trans_m * n(rng));
   }
 }
 
@@ -51,11 +50,12 @@ TEST(StereoVoLocalBa, CollectTracksKeepsSharedTracksTriangulatedWhereTheDisparit
   for (int k = 0; k < 3; ++k) {
     Eigen::Vector3d uvu;
     ASSERT_TRUE(cam.Project(window[k].T_world_camera.inverse() * p_world, &uvu));
-    window[k].observations.push_back({7, uvu});
+    window[k].observations.push_back({7, uvu, false, {}, {}});
   }
-  window[0].observations.push_back({8, {300, 200, 290}});  // seen once: not shared
-  window[1].observations.push_back({9, {300, 200, 301}});  // negative disparity: skipped
-  window[2].observations.push_back({9, {300, 200, 290}});
+  window[0].observations.push_back({8, {300, 200, 290}, false, {}, {}});  // seen once: not shared
+  window[1].observations.push_back(
+      {9, {300, 200, 301}, false, {}, {}});  // negative disparity: skipped
+  window[2].observations.push_back({9, {300, 200, 290}, false, {}, {}});
   const std::vector<BaTrack> tracks = CollectTracks(cam, window, 2);
   ASSERT_EQ(tracks.size(), 1u);
   EXPECT_EQ(tracks[0].track_id, 7);
@@ -69,17 +69,44 @@ TEST(StereoVoLocalBa, ResidualBlocksPassTheGradientChecker) {
   std::vector<Eigen::Isometry3d> truth;
   std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 4, 40, 1.0, 0.05, 0.3, 3, &truth);
   Perturb(&window, 0.05, 0.5, 4);
+  for (BaKeyframe& kf : window) {  // laser depth points on every third observation
+    for (size_t i = 0; i < kf.observations.size(); i += 3) {
+      BaObservation& o = kf.observations[i];
+      o.has_point = true;
+      o.m_camera = cam.Triangulate(o.uvu(0), o.uvu(1), o.uvu(0) - o.uvu(2)) * 1.01;
+      o.W_camera << 30, 1, 0, 1, 30, 2, 0, 2, 10;
+    }
+  }
+  for (size_t k = 1; k < window.size(); ++k) {  // motion priors (the chain, slightly off)
+    window[k].has_motion = true;
+    window[k].T_prev_camera =
+        truth[k - 1].inverse() * truth[k] * MakeMotion(0.01, 0, 0, 0, 0.02, 0);
+    window[k].motion_covariance.diagonal() << 1e-4, 2e-4, 1e-4, 1e-5, 1e-5, 2e-5;
+  }
   const std::vector<BaTrack> tracks = CollectTracks(cam, window, 2);
   ASSERT_GE(tracks.size(), 20u);
+  size_t observations = 0, with_points = 0;
+  for (const BaTrack& t : tracks) {
+    for (const auto& [k, o] : t.observations) {
+      ++observations;
+      with_points += o.has_point;
+    }
+  }
   BaState state = InitialState(window, tracks);
   // A non-zero perturbation to probe at.
-  for (size_t k = 1; k < state.delta.size(); ++k) state.delta[k] = {0.01, -0.02, 0.03, 0.002, -0.003, 0.001};
+  for (size_t k = 1; k < state.delta.size(); ++k) {
+    state.delta[k] = {0.01, -0.02, 0.03, 0.002, -0.003, 0.001};
+  }
+  LocalBaOptions options;
+  options.laser_points = true;
   ceres::Problem problem;
-  BuildProblem(cam, window, tracks, LocalBaOptions(), {}, &state, &problem);
+  BuildProblem(cam, window, tracks, options, 0.3, {}, &state, &problem);
   std::vector<ceres::ResidualBlockId> blocks;
   problem.GetResidualBlocks(&blocks);
-  ASSERT_GT(blocks.size(), 40u);
-  int checked_a = 0, checked_b = 0;
+  ASSERT_GT(with_points, 10u);
+  // Reprojections, laser points, motion priors.
+  EXPECT_EQ(blocks.size(), observations + with_points + window.size() - 1);
+  int checked_a = 0, checked_b = 0, checked_motion = 0;
   for (ceres::ResidualBlockId id : blocks) {
     std::vector<double*> params;
     problem.GetParameterBlocksForResidualBlock(id, &params);
@@ -88,18 +115,18 @@ TEST(StereoVoLocalBa, ResidualBlocksPassTheGradientChecker) {
     ceres::GradientChecker checker(cost, no_manifolds, fl::test::CheckerOptions());
     ceres::GradientChecker::ProbeResults results;
     EXPECT_TRUE(checker.Probe(params.data(), 1e-6, &results)) << results.error_log;
-    ++(params.size() == 1 ? checked_a : checked_b);
+    ++(params.size() == 1 ? checked_a : params.size() == 4 ? checked_motion : checked_b);
   }
   EXPECT_GT(checked_a, 0);  // keyframe 0 (point only)
-  EXPECT_GT(checked_b, 0);  // the others (rho, phi, point)
+  EXPECT_GT(checked_b, 0);  // the others (rho, phi, point) and the laser points
+  EXPECT_EQ(checked_motion, static_cast<int>(window.size()) - 1);  // (rho_i, phi_i, rho_j, phi_j)
 }
 
 TEST(StereoVoLocalBa, ReducesTheErrorOfAPerturbedWindow) {
   const StereoCamera cam = Cam();
   for (uint32_t seed : {1u, 2u, 3u}) {
     std::vector<Eigen::Isometry3d> truth;
-    std::vector<BaKeyframe> window =
-        MakeKeyframeWindow(cam, 6, 300, 1.0, 0.04, 0.3, seed, &truth);
+    std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 6, 300, 1.0, 0.04, 0.3, seed, &truth);
     Perturb(&window, 0.10, 1.0, seed + 100);
     double before_t = 0, before_r = 0;
     for (size_t k = 1; k < window.size(); ++k) {
@@ -168,6 +195,46 @@ TEST(StereoVoLocalBa, TheMotionPriorCarriesWhatTheChainMeasured) {
   }
   EXPECT_LT(error[1], 0.005);
   EXPECT_LT(error[1], 0.5 * error[0]) << "without the prior " << error[0] << " m";
+}
+
+TEST(StereoVoLocalBa, LaserPointsHoldTheScaleAgainstADisparityBias) {
+  // Every right image x off by +0.4 px (disparities too small: points too far, motion too
+  // long). Laser depth points (3 cm) on a third of the observations pull the scale back.
+  const StereoCamera cam = Cam();
+  std::vector<Eigen::Isometry3d> truth;
+  std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 5, 200, 1.0, 0.03, 0.3, 31, &truth);
+  std::mt19937 rng(32);
+  std::normal_distribution<double> depth_noise(0.0, 0.03);
+  int measured = 0;
+  for (size_t k = 0; k < window.size(); ++k) {
+    for (size_t i = 0; i < window[k].observations.size(); ++i) {
+      BaObservation& o = window[k].observations[i];
+      if (i % 3 == 0) {
+        // The true point along the observed pixel's ray, from the noise-free disparity.
+        const Eigen::Vector3d ray((o.uvu(0) - cam.cx) / cam.fx, (o.uvu(1) - cam.cy) / cam.fy, 1.0);
+        const double z_true = cam.Triangulate(o.uvu(0), o.uvu(1), o.uvu(0) - o.uvu(2)).z();
+        o.has_point = true;
+        o.m_camera = (z_true + depth_noise(rng)) * ray;
+        o.W_camera = PointSqrtInformation(ray, 0.03, 2.5 * z_true / cam.fx);
+        ++measured;
+      }
+      o.uvu(2) += 0.4;
+    }
+  }
+  ASSERT_GT(measured, 100);
+  LocalBaOptions options;
+  double error[2] = {0, 0};
+  int laser_points = 0;
+  for (int laser = 0; laser < 2; ++laser) {
+    options.laser_points = laser == 1;
+    const LocalBaResult r = LocalBundleAdjustment(cam, window, options, 0.3);
+    ASSERT_TRUE(r.ok) << r.message;
+    error[laser] = TransError(r.T_world_camera.back(), truth.back());
+    if (laser == 1) laser_points = r.laser_points;
+  }
+  EXPECT_GT(laser_points, 100);
+  EXPECT_GT(error[0], 0.01) << "the bias must show without the laser";
+  EXPECT_LT(error[1], 0.5 * error[0]) << "without the laser points " << error[0] << " m";
 }
 
 TEST(StereoVoLocalBa, TheRelativeCovarianceMatchesTheScatterOverNoiseDraws) {

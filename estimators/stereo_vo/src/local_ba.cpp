@@ -67,10 +67,10 @@ class KeyframeMotionCost {
                                      const Eigen::Isometry3d& T_i_j,
                                      const Eigen::Matrix<double, 6, 6>& sqrt_information) {
     return new ceres::AutoDiffCostFunction<KeyframeMotionCost, 6, 3, 3, 3, 3>(
-        new KeyframeMotionCost(T0_o_i, T0_o_j,
-                               Se3BetweenCost(T_i_j.translation(),
-                                              Eigen::Quaterniond(T_i_j.linear()),
-                                              sqrt_information)));
+        new KeyframeMotionCost(
+            T0_o_i, T0_o_j,
+            Se3BetweenCost(T_i_j.translation(), Eigen::Quaterniond(T_i_j.linear()),
+                           sqrt_information)));
   }
   EIGEN_MAKE_ALIGNED_OPERATOR_NEW
 
@@ -90,6 +90,42 @@ class KeyframeMotionCost {
   }
   Eigen::Isometry3d T0_o_i_, T0_o_j_;
   Se3BetweenCost between_;
+};
+
+// The laser depth point error of an observation by keyframe k (LocalBaOptions::laser_points):
+//   p_k = R(-phi) (R0^T (p_o - t0) - rho),   r = s W (p_k - m)
+// (the point in keyframe k's frame under T_o_k = T0_o_k [R(phi) | rho], as StereoPointCostB).
+class LaserPointCost {
+ public:
+  LaserPointCost(const Eigen::Isometry3d& T0_o_k, const Eigen::Vector3d& m_k,
+                 const Eigen::Matrix3d& sW)
+      : R0_(T0_o_k.linear()), t0_(T0_o_k.translation()), m_(m_k), sW_(sW) {}
+  template <typename T>
+  bool operator()(const T* const rho, const T* const phi, const T* const p_o, T* residual) const {
+    const T d[3] = {p_o[0] - T(t0_(0)), p_o[1] - T(t0_(1)), p_o[2] - T(t0_(2))};
+    T q_minus_rho[3];
+    for (int i = 0; i < 3; ++i) {
+      q_minus_rho[i] = T(R0_(0, i)) * d[0] + T(R0_(1, i)) * d[1] + T(R0_(2, i)) * d[2] - rho[i];
+    }
+    const T minus_phi[3] = {-phi[0], -phi[1], -phi[2]};
+    T p_k[3];
+    ceres::AngleAxisRotatePoint(minus_phi, q_minus_rho, p_k);
+    const T e[3] = {p_k[0] - T(m_(0)), p_k[1] - T(m_(1)), p_k[2] - T(m_(2))};
+    for (int i = 0; i < 3; ++i) {
+      residual[i] = T(sW_(i, 0)) * e[0] + T(sW_(i, 1)) * e[1] + T(sW_(i, 2)) * e[2];
+    }
+    return true;
+  }
+  static ceres::CostFunction* Create(const Eigen::Isometry3d& T0_o_k, const Eigen::Vector3d& m_k,
+                                     const Eigen::Matrix3d& sW) {
+    return new ceres::AutoDiffCostFunction<LaserPointCost, 3, 3, 3, 3>(
+        new LaserPointCost(T0_o_k, m_k, sW));
+  }
+
+ private:
+  Eigen::Matrix3d R0_;
+  Eigen::Vector3d t0_, m_;
+  Eigen::Matrix3d sW_;
 };
 
 Eigen::Isometry3d CurrentPose(const BaState& state, size_t k) {
@@ -113,7 +149,8 @@ double RmsPx(const StereoCamera& camera, const std::vector<BaTrack>& tracks,
     const Eigen::Vector3d p_o(state.point[t][0], state.point[t][1], state.point[t][2]);
     for (size_t m = 0; m < tracks[t].observations.size(); ++m) {
       if (!keep[t][m]) continue;
-      const auto& [k, uvu] = tracks[t].observations[m];
+      const auto& [k, obs] = tracks[t].observations[m];
+      const Eigen::Vector3d& uvu = obs.uvu;
       Eigen::Vector3d predicted;
       if (!camera.Project(CurrentPose(state, k).inverse() * p_o, &predicted)) continue;
       sum += (predicted - uvu).squaredNorm();
@@ -198,7 +235,8 @@ bool PoseCovariance(const BaState& state, ceres::Problem* problem, Eigen::Matrix
       H_cc.noalias() += row * row.transpose();
       continue;
     }
-    if (pose >= 0) H_cc.block<6, 6>(6 * pose, 6 * pose).noalias() += pose_row * pose_row.transpose();
+    if (pose >= 0)
+      H_cc.block<6, 6>(6 * pose, 6 * pose).noalias() += pose_row * pose_row.transpose();
     if (point >= 0) {
       H_pp[point].noalias() += point_row * point_row.transpose();
       if (pose >= 0) {
@@ -237,8 +275,7 @@ bool LastRelativeCovariance(const BaState& state, ceres::Problem* problem, Matri
     const Eigen::Isometry3d T_ij = state.T0_o_k[i].inverse() * state.T0_o_k[j];
     const Matrix6d A = Adjoint(T_ij.inverse());
     const Matrix6d cross = A * poses.block<6, 6>(6 * bi, 6 * bj);  // Cov(A delta_i, delta_j)
-    *cov = s_jj + A * poses.block<6, 6>(6 * bi, 6 * bi) * A.transpose() - cross -
-           cross.transpose();
+    *cov = s_jj + A * poses.block<6, 6>(6 * bi, 6 * bi) * A.transpose() - cross - cross.transpose();
   }
   *cov = 0.5 * (*cov + cov->transpose());
   return cov->allFinite();
@@ -264,8 +301,8 @@ fl::Status LocalBaOptions::Validate() const {
   return fl::Status::Ok();
 }
 
-std::vector<BaTrack> CollectTracks(const StereoCamera& camera, const std::vector<BaKeyframe>& window,
-                                   int min_track_keyframes) {
+std::vector<BaTrack> CollectTracks(const StereoCamera& camera,
+                                   const std::vector<BaKeyframe>& window, int min_track_keyframes) {
   std::vector<BaTrack> all;
   if (window.empty()) return all;
   std::unordered_map<int64_t, size_t> index;
@@ -280,7 +317,7 @@ std::vector<BaTrack> CollectTracks(const StereoCamera& camera, const std::vector
       BaTrack& t = all[it->second];
       // One observation per keyframe (the first).
       if (!t.observations.empty() && t.observations.back().first == static_cast<int>(k)) continue;
-      t.observations.emplace_back(static_cast<int>(k), o.uvu);
+      t.observations.emplace_back(static_cast<int>(k), o);
     }
   }
   const Eigen::Isometry3d T_world_o = window[0].T_world_camera;
@@ -290,13 +327,13 @@ std::vector<BaTrack> CollectTracks(const StereoCamera& camera, const std::vector
     // Triangulate where the disparity is largest (the most precise depth).
     const auto best = std::max_element(
         t.observations.begin(), t.observations.end(), [](const auto& a, const auto& b) {
-          return a.second(0) - a.second(2) < b.second(0) - b.second(2);
+          return a.second.uvu(0) - a.second.uvu(2) < b.second.uvu(0) - b.second.uvu(2);
         });
-    const Eigen::Vector3d& z = best->second;
+    const Eigen::Vector3d& z = best->second.uvu;
     const Eigen::Isometry3d T_o_k = T_world_o.inverse() * window[best->first].T_world_camera;
     t.p_o = T_o_k * camera.Triangulate(z(0), z(1), z(0) - z(2));
     // Observations from where the point would be behind the camera cannot be evaluated.
-    std::vector<std::pair<int, Eigen::Vector3d>> visible;
+    std::vector<std::pair<int, BaObservation>> visible;
     for (const auto& obs : t.observations) {
       const Eigen::Isometry3d T_o_m = T_world_o.inverse() * window[obs.first].T_world_camera;
       if ((T_o_m.inverse() * t.p_o).z() > 1e-3) visible.push_back(obs);
@@ -311,8 +348,8 @@ std::vector<BaTrack> CollectTracks(const StereoCamera& camera, const std::vector
 
 BaState InitialState(const std::vector<BaKeyframe>& window, const std::vector<BaTrack>& tracks) {
   BaState state;
-  const Eigen::Isometry3d T_o_world = window.empty() ? Eigen::Isometry3d::Identity()
-                                                     : window[0].T_world_camera.inverse();
+  const Eigen::Isometry3d T_o_world =
+      window.empty() ? Eigen::Isometry3d::Identity() : window[0].T_world_camera.inverse();
   for (const BaKeyframe& kf : window) {
     state.T0_o_k.push_back(T_o_world * kf.T_world_camera);
     state.delta.push_back({0, 0, 0, 0, 0, 0});
@@ -323,9 +360,10 @@ BaState InitialState(const std::vector<BaKeyframe>& window, const std::vector<Ba
 }
 
 void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& window,
-                  const std::vector<BaTrack>& tracks,
-                  const LocalBaOptions& options, const std::vector<std::vector<bool>>& keep,
-                  BaState* state, ceres::Problem* problem) {
+                  const std::vector<BaTrack>& tracks, const LocalBaOptions& options,
+                  double sigma_px, const std::vector<std::vector<bool>>& keep, BaState* state,
+                  ceres::Problem* problem) {
+  double* d0 = state->delta.empty() ? nullptr : state->delta[0].data();
   for (size_t t = 0; t < tracks.size(); ++t) {
     const auto& observations = tracks[t].observations;
     int kept = 0;
@@ -334,14 +372,23 @@ void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& win
     double* point = state->point[t].data();
     for (size_t m = 0; m < observations.size(); ++m) {
       if (!keep.empty() && !keep[t][m]) continue;
-      const auto& [k, uvu] = observations[m];
+      const auto& [k, obs] = observations[m];
       ceres::LossFunction* loss = new ceres::HuberLoss(options.huber_px);
+      double* delta = state->delta[k].data();
       if (k == 0) {
-        problem->AddResidualBlock(StereoPointCostA::Create(camera, uvu), loss, point);
+        problem->AddResidualBlock(StereoPointCostA::Create(camera, obs.uvu), loss, point);
       } else {
-        double* delta = state->delta[k].data();
-        problem->AddResidualBlock(SplitPoseCost::Create(camera, state->T0_o_k[k], uvu), loss,
+        problem->AddResidualBlock(SplitPoseCost::Create(camera, state->T0_o_k[k], obs.uvu), loss,
                                   delta, delta + 3, point);
+      }
+      if (options.laser_points && obs.has_point) {
+        problem->AddResidualBlock(
+            LaserPointCost::Create(state->T0_o_k[k], obs.m_camera, sigma_px * obs.W_camera),
+            new ceres::HuberLoss(options.huber_px), delta, delta + 3, point);
+        if (k == 0) {  // keyframe 0 is the gauge
+          problem->SetParameterBlockConstant(d0);
+          problem->SetParameterBlockConstant(d0 + 3);
+        }
       }
     }
   }
@@ -359,13 +406,12 @@ void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& win
     }
     double* di = state->delta[k - 1].data();
     double* dj = state->delta[k].data();
-    problem->AddResidualBlock(
-        KeyframeMotionCost::Create(state->T0_o_k[k - 1], state->T0_o_k[k], kf.T_prev_camera,
-                                   sqrt_information),
-        nullptr, di, di + 3, dj, dj + 3);
+    problem->AddResidualBlock(KeyframeMotionCost::Create(state->T0_o_k[k - 1], state->T0_o_k[k],
+                                                         kf.T_prev_camera, sqrt_information),
+                              nullptr, di, di + 3, dj, dj + 3);
     if (k == 1) {  // keyframe 0 is the gauge
-      problem->SetParameterBlockConstant(di);
-      problem->SetParameterBlockConstant(di + 3);
+      problem->SetParameterBlockConstant(d0);
+      problem->SetParameterBlockConstant(d0 + 3);
     }
   }
 }
@@ -395,7 +441,7 @@ LocalBaResult LocalBundleAdjustment(const StereoCamera& camera,
   for (int round = 0; round < 2; ++round) {
     {
       ceres::Problem problem;
-      BuildProblem(camera, window, tracks, options, keep, &state, &problem);
+      BuildProblem(camera, window, tracks, options, sigma_px, keep, &state, &problem);
       if (problem.NumResidualBlocks() == 0 || !Solve(options, &problem, &result.iterations)) {
         result.message = "the window's bundle adjustment did not converge";
         return result;
@@ -407,8 +453,9 @@ LocalBaResult LocalBundleAdjustment(const StereoCamera& camera,
     for (size_t t = 0; t < tracks.size(); ++t) {
       const Eigen::Vector3d p_o(state.point[t][0], state.point[t][1], state.point[t][2]);
       for (size_t m = 0; m < tracks[t].observations.size(); ++m) {
-        const auto& [k, uvu] = tracks[t].observations[m];
-        if (ObservationError(camera, state.T0_o_k[k], p_o, uvu) > options.outlier_threshold_px) {
+        const auto& [k, obs] = tracks[t].observations[m];
+        if (ObservationError(camera, state.T0_o_k[k], p_o, obs.uvu) >
+            options.outlier_threshold_px) {
           keep[t][m] = false;
           ++outliers;
         }
@@ -418,12 +465,19 @@ LocalBaResult LocalBundleAdjustment(const StereoCamera& camera,
     if (outliers == 0) break;
   }
   result.observations = CountKept(keep);
+  if (options.laser_points) {
+    for (size_t t = 0; t < tracks.size(); ++t) {
+      for (size_t m = 0; m < tracks[t].observations.size(); ++m) {
+        result.laser_points += keep[t][m] && tracks[t].observations[m].second.has_point;
+      }
+    }
+  }
   result.final_rms_px = RmsPx(camera, tracks, keep, state);
 
   // Covariance at the solution (delta = 0 there after Relinearise).
   {
     ceres::Problem problem;
-    BuildProblem(camera, window, tracks, options, keep, &state, &problem);
+    BuildProblem(camera, window, tracks, options, sigma_px, keep, &state, &problem);
     Matrix6d cov;
     if (LastRelativeCovariance(state, &problem, &cov)) {
       result.covariance_ok = true;

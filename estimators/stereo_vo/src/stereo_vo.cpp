@@ -394,7 +394,8 @@ void StereoVo::StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* r
     kf.id = keyframe_id_;
     kf.utime = frame.utime;
     kf.T_world_camera = T_world_camera_;
-    kf.observations = stages::KeyframeObservations(camera_, frame, offset_px_);
+    kf.observations =
+        stages::KeyframeObservations(camera_, frame, offset_px_, options_.laser_depth);
     ba_window_.push_back(std::move(kf));
     const size_t window = static_cast<size_t>(options_.local_ba.window_keyframes);
     if (ba_window_.size() > window) {

@@ -294,6 +294,23 @@ Refinement RefineStage(const StereoCamera& camera, const std::vector<StereoCorre
   return out;
 }
 
+LaserDepthVerdict LaserPoint(const StereoCamera& camera, const LaserDepthMap& map,
+                             const Eigen::Vector3d& obs, double stereo_depth_m,
+                             const LaserDepthOptions& options, Eigen::Vector3d* m,
+                             Eigen::Matrix3d* W) {
+  const FeatureDepth d =
+      map.Associate(obs(0), obs(1), stereo_depth_m,
+                    StereoDepthSigma(camera, stereo_depth_m, options.stereo_disparity_sigma_px));
+  if (d.source != DepthSource::kLaser && d.source != DepthSource::kBoth) {
+    return d.verdict == LaserDepthVerdict::kOk ? LaserDepthVerdict::kTooFew : d.verdict;
+  }
+  const Eigen::Vector3d ray((obs(0) - camera.cx) / camera.fx, (obs(1) - camera.cy) / camera.fy,
+                            1.0);
+  *m = d.depth_m * ray;
+  *W = PointSqrtInformation(ray, d.sigma_m, options.point_lateral_sigma_px * d.depth_m / camera.fx);
+  return LaserDepthVerdict::kOk;
+}
+
 LaserAssociation AssociateLaserDepth(const StereoCamera& camera, const StereoFrame& prev,
                                      const StereoFrame& cur,
                                      const std::vector<StereoCorrespondence>& corr,
@@ -305,21 +322,10 @@ LaserAssociation AssociateLaserDepth(const StereoCamera& camera, const StereoFra
                        const Eigen::Vector3d& p_stereo, bool* has, Eigen::Vector3d* m,
                        Eigen::Matrix3d* W) {
     if (map == nullptr) return;
-    const double z = p_stereo.z();
-    const FeatureDepth d = map->Associate(
-        obs(0), obs(1), z, StereoDepthSigma(camera, z, options.stereo_disparity_sigma_px));
-    if (d.source == DepthSource::kLaser || d.source == DepthSource::kBoth) {
-      const Eigen::Vector3d ray((obs(0) - camera.cx) / camera.fx, (obs(1) - camera.cy) / camera.fy,
-                                1.0);
-      *has = true;
-      *m = d.depth_m * ray;
-      *W = PointSqrtInformation(ray, d.sigma_m,
-                                options.point_lateral_sigma_px * d.depth_m / camera.fx);
-    } else if (d.verdict == LaserDepthVerdict::kInconsistent) {
-      ++out.inconsistent;
-    } else if (d.verdict == LaserDepthVerdict::kStereoDisagrees) {
-      ++out.disagrees;
-    }
+    const LaserDepthVerdict verdict = LaserPoint(camera, *map, obs, p_stereo.z(), options, m, W);
+    *has = verdict == LaserDepthVerdict::kOk;
+    if (verdict == LaserDepthVerdict::kInconsistent) ++out.inconsistent;
+    if (verdict == LaserDepthVerdict::kStereoDisagrees) ++out.disagrees;
   };
   for (size_t i = 0; i < corr.size(); ++i) {
     PointMeasurement& pm = out.measured.per_correspondence[i];
@@ -390,7 +396,8 @@ void KeyframePoints(const StereoCamera& camera, const StereoFrame& frame, double
 }
 
 std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
-                                                const StereoFrame& frame, double offset_px) {
+                                                const StereoFrame& frame, double offset_px,
+                                                const LaserDepthOptions& laser_options) {
   std::vector<BaObservation> out;
   out.reserve(At(frame.stereo_matches));
   for (int i = 0; i < frame.fl.size(); ++i) {
@@ -399,6 +406,12 @@ std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
     BaObservation o;
     o.track_id = frame.track_id[At(i)];
     o.uvu = {pl.x, pl.y, CorrectRightX(camera, frame.right_x[At(i)], offset_px)};
+    const double disparity = o.uvu(0) - o.uvu(2);
+    if (frame.laser && disparity > 0) {
+      const double z = camera.Triangulate(o.uvu(0), o.uvu(1), disparity).z();
+      o.has_point = LaserPoint(camera, *frame.laser, o.uvu, z, laser_options, &o.m_camera,
+                               &o.W_camera) == LaserDepthVerdict::kOk;
+    }
     out.push_back(o);
   }
   return out;

@@ -12,7 +12,10 @@
 //     k > 0:  project(R(-phi)(R0^T (p_o - t0) - rho)) - z_k      (StereoPointCostB, with rho and
 //                                                                 phi as two parameter blocks)
 // in pixels, under a Huber loss; a track counts when at least min_track_keyframes keyframes
-// observed it. With motion_prior, each keyframe's chained frame-to-frame motion from the one
+// observed it. Laser-aided (laser_points and observations with has_point): the 3D point error
+// s W (p_k - m) of LV-SLAM's improved objective (motion.hpp, PointMeasurement; s = the pixel
+// noise) joins the reprojection of that observation, so laser depth holds the window's scale.
+// With motion_prior, each keyframe's chained frame-to-frame motion from the one
 // before it (what the plain VO would have reported, through every frame between them) joins as
 // an SE(3) between factor with its covariance (fl::Se3BetweenCost): the window keeps what the
 // intermediate frames measured and adds what the shared tracks say across keyframes. After a
@@ -62,6 +65,11 @@ struct LocalBaOptions {
   // short (the simulator: ~2.2 keyframes per track) knows less than the chain it replaces.
   bool motion_prior = true;
   double motion_prior_covariance_scale = 10.0;
+  // Laser-aided mode: the observations' laser depth points as 3D point errors (see above). Off
+  // by default: on the KITTI 04 snippet (the only sequence with laser data) they make the
+  // laser-aided run worse, 0.615 -> 0.659 % drift (its laser depths put the path 0.3 % long
+  // where stereo puts it 0.4 % short; docs/STEREO_VO.md); the frame-to-frame laser terms stay.
+  bool laser_points = false;
   // [-] sparse Schur (true) or dense Schur (false) linear solver; dense is faster for the small
   // windows (at most ~10 keyframes) this is meant for.
   bool sparse_schur = false;
@@ -76,6 +84,7 @@ struct LocalBaOptions {
     a->Visit("min_points", &min_points);
     a->Visit("motion_prior", &motion_prior);
     a->Visit("motion_prior_covariance_scale", &motion_prior_covariance_scale);
+    a->Visit("laser_points", &laser_points);
     a->Visit("sparse_schur", &sparse_schur);
   }
   fl::Status Validate() const;
@@ -84,9 +93,14 @@ struct LocalBaOptions {
 // One observation of a track by a keyframe: (u_left, v, u_right) [px], u_right already
 // corrected by the disparity offset estimate (CorrectRightX), so u_left - u_right > 0 is the
 // true disparity.
+// Laser-aided mode: a validated laser depth makes the observation also a 3D point measurement
+// (PointMeasurement in motion.hpp) in the keyframe's camera frame.
 struct BaObservation {
   int64_t track_id = -1;
   Eigen::Vector3d uvu = Eigen::Vector3d::Zero();
+  bool has_point = false;
+  Eigen::Vector3d m_camera = Eigen::Vector3d::Zero();  // [m] measured point, keyframe camera
+  Eigen::Matrix3d W_camera = Eigen::Matrix3d::Zero();  // [1/m] its square-root information
 };
 
 struct BaKeyframe {
@@ -106,14 +120,14 @@ struct BaKeyframe {
 struct BaTrack {
   int64_t track_id = -1;
   Eigen::Vector3d p_o = Eigen::Vector3d::Zero();  // [m] initial point, oldest keyframe's frame
-  std::vector<std::pair<int, Eigen::Vector3d>> observations;  // (keyframe index, uvu [px])
+  std::vector<std::pair<int, BaObservation>> observations;  // (keyframe index, observation)
 };
 
 // Stage 1: the tracks observed by at least min_track_keyframes keyframes, each triangulated from
 // its observation with the largest disparity and moved into frame o by the window's poses.
 // Observations with a disparity <= 0 are skipped.
-std::vector<BaTrack> CollectTracks(const StereoCamera& camera, const std::vector<BaKeyframe>& window,
-                                   int min_track_keyframes);
+std::vector<BaTrack> CollectTracks(const StereoCamera& camera,
+                                   const std::vector<BaKeyframe>& window, int min_track_keyframes);
 
 // Unknowns of the problem (owned here; Ceres holds pointers into them).
 struct BaState {
@@ -130,14 +144,15 @@ struct BaState {
 // constant block); observations where `keep` is false are left out (keep[t][m]: track t's m-th
 // observation; empty: keep all).
 BaState InitialState(const std::vector<BaKeyframe>& window, const std::vector<BaTrack>& tracks);
+// sigma_px: the pixel noise s of the laser point errors.
 void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& window,
-                  const std::vector<BaTrack>& tracks,
-                  const LocalBaOptions& options, const std::vector<std::vector<bool>>& keep,
-                  BaState* state, ceres::Problem* problem);
+                  const std::vector<BaTrack>& tracks, const LocalBaOptions& options,
+                  double sigma_px, const std::vector<std::vector<bool>>& keep, BaState* state,
+                  ceres::Problem* problem);
 
 struct LocalBaResult {
   bool ok = false;
-  std::string message;  // why not adjusted, when ok is false
+  std::string message;                            // why not adjusted, when ok is false
   std::vector<Eigen::Isometry3d> T_world_camera;  // refined, one per window keyframe
   // Covariance of the newest relative pose T_{n-2}_{n-1} (camera frames, right perturbation,
   // [rho; phi]) with sigma_px as the pixel noise; covariance_ok false if Ceres could not
@@ -145,6 +160,7 @@ struct LocalBaResult {
   bool covariance_ok = false;
   Eigen::Matrix<double, 6, 6> covariance_last = Eigen::Matrix<double, 6, 6>::Zero();
   int points = 0, observations = 0, outliers = 0, iterations = 0;
+  int laser_points = 0;                         // observations with a laser depth point error
   double initial_rms_px = 0, final_rms_px = 0;  // reprojection RMS before / after [px]
 };
 

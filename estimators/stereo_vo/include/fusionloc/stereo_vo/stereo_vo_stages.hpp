@@ -166,6 +166,14 @@ Refinement RefineStage(const StereoCamera& camera, const std::vector<StereoCorre
 // validated against its stereo depth, as 3D point measurements (PointMeasurement: m = depth *
 // ray, depth sigma from the association, lateral sigma point_lateral_sigma_px * depth / fx). Counts
 // what it gave and rejected.
+// One feature's laser depth as a 3D point measurement: the association of LaserDepthMap
+// validated against its stereo depth; kOk with *m = depth * ray (left camera frame [m]) and *W
+// its square-root information (depth sigma along the ray, point_lateral_sigma_px across it),
+// else why not (kTooFew also when the map gave only the stereo depth).
+LaserDepthVerdict LaserPoint(const StereoCamera& camera, const LaserDepthMap& map,
+                             const Eigen::Vector3d& obs, double stereo_depth_m,
+                             const LaserDepthOptions& options, Eigen::Vector3d* m,
+                             Eigen::Matrix3d* W);
 struct LaserAssociation {
   PointMeasurements measured;
   int prev = 0, cur = 0;
@@ -200,8 +208,10 @@ KeyframeFactor MakeKeyframeFactor(const Eigen::Isometry3d& T_base_camera,
 void KeyframePoints(const StereoCamera& camera, const StereoFrame& frame, double offset_px,
                     std::vector<Eigen::Vector3f>* points, std::vector<float>* intensities);
 // The local bundle adjustment's observations of a keyframe: every stereo feature with a track
-// id, (u_left, v, u_right corrected by the disparity offset offset_px).
+// id, (u_left, v, u_right corrected by the disparity offset offset_px), with its validated laser
+// depth point (LaserPoint) when the frame has a usable scan.
 std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
-                                                const StereoFrame& frame, double offset_px);
+                                                const StereoFrame& frame, double offset_px,
+                                                const LaserDepthOptions& laser_options);
 
 }  // namespace fl::vo::stages
