@@ -92,9 +92,9 @@ class KeyframeMotionCost {
   Se3BetweenCost between_;
 };
 
-// The laser depth point error of an observation by keyframe k (LocalBaOptions::laser_points):
+// The laser depth point error of an observation by keyframe k (LocalBaOptions::laser_points),
 //   p_k = R(-phi) (R0^T (p_o - t0) - rho),   r = s W (p_k - m)
-// (the point in keyframe k's frame under T_o_k = T0_o_k [R(phi) | rho], as StereoPointCostB).
+// the point in keyframe k's frame by PointInFrameB (as StereoPointCostB).
 class LaserPointCost {
  public:
   LaserPointCost(const Eigen::Isometry3d& T0_o_k, const Eigen::Vector3d& m_k,
@@ -102,14 +102,8 @@ class LaserPointCost {
       : R0_(T0_o_k.linear()), t0_(T0_o_k.translation()), m_(m_k), sW_(sW) {}
   template <typename T>
   bool operator()(const T* const rho, const T* const phi, const T* const p_o, T* residual) const {
-    const T d[3] = {p_o[0] - T(t0_(0)), p_o[1] - T(t0_(1)), p_o[2] - T(t0_(2))};
-    T q_minus_rho[3];
-    for (int i = 0; i < 3; ++i) {
-      q_minus_rho[i] = T(R0_(0, i)) * d[0] + T(R0_(1, i)) * d[1] + T(R0_(2, i)) * d[2] - rho[i];
-    }
-    const T minus_phi[3] = {-phi[0], -phi[1], -phi[2]};
     T p_k[3];
-    ceres::AngleAxisRotatePoint(minus_phi, q_minus_rho, p_k);
+    PointInFrameB(R0_, t0_, rho, phi, p_o, p_k);
     const T e[3] = {p_k[0] - T(m_(0)), p_k[1] - T(m_(1)), p_k[2] - T(m_(2))};
     for (int i = 0; i < 3; ++i) {
       residual[i] = T(sW_(i, 0)) * e[0] + T(sW_(i, 1)) * e[1] + T(sW_(i, 2)) * e[2];

@@ -24,6 +24,20 @@
 
 namespace fl::vo {
 
+// The point p_a of frame a in frame b, T_a_b = T0_a_b [R(phi) | rho] (R0, t0: T0_a_b):
+//     p_b = R(-phi) (R0^T (p_a - t0) - rho).
+template <typename T>
+void PointInFrameB(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, const T* rho,
+                   const T* phi, const T* p_a, T* p_b) {
+  const T d[3] = {p_a[0] - T(t0(0)), p_a[1] - T(t0(1)), p_a[2] - T(t0(2))};
+  T q_minus_rho[3];
+  for (int i = 0; i < 3; ++i) {
+    q_minus_rho[i] = T(R0(0, i)) * d[0] + T(R0(1, i)) * d[1] + T(R0(2, i)) * d[2] - rho[i];
+  }
+  const T minus_phi[3] = {-phi[0], -phi[1], -phi[2]};
+  ceres::AngleAxisRotatePoint(minus_phi, q_minus_rho, p_b);
+}
+
 class StereoReprojectionCost {
  public:
   enum Direction { kForward, kBackward };
@@ -119,16 +133,8 @@ class StereoPointCostB {
       : cam_(cam), R0_(T0_a_b.linear()), t0_(T0_a_b.translation()), obs_(observed_uvu) {}
   template <typename T>
   bool operator()(const T* const delta, const T* const p_a, T* residual) const {
-    const T* rho = delta;
-    const T* phi = delta + 3;
-    const T d[3] = {p_a[0] - T(t0_(0)), p_a[1] - T(t0_(1)), p_a[2] - T(t0_(2))};
-    T q_minus_rho[3];
-    for (int i = 0; i < 3; ++i) {
-      q_minus_rho[i] = T(R0_(0, i)) * d[0] + T(R0_(1, i)) * d[1] + T(R0_(2, i)) * d[2] - rho[i];
-    }
-    const T minus_phi[3] = {-phi[0], -phi[1], -phi[2]};
     T p_b[3];
-    ceres::AngleAxisRotatePoint(minus_phi, q_minus_rho, p_b);
+    PointInFrameB(R0_, t0_, delta, delta + 3, p_a, p_b);
     if (!(p_b[2] > T(1e-6))) return false;
     const T inv_z = T(1.0) / p_b[2];
     residual[0] = T(cam_.fx) * p_b[0] * inv_z + T(cam_.cx) - T(obs_(0));
