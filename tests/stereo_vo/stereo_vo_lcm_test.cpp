@@ -262,6 +262,54 @@ TEST(StereoVoLcm, ProcessUsesTheOdometryPrior) {
   EXPECT_EQ(last_status.messages_dropped, 1);  // the NaN sample
 }
 
+// local_ba through the process: a keyframe every 10 cm over a textured plane, each adjusted
+// with its window and reported in the status.
+TEST(StereoVoLcm, ProcessRunsTheLocalBundleAdjustment) {
+  const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
+  if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
+  fl::test::TempDir dir;
+  const StereoCalibration calib = fl::test::stereo::TestCalibration();
+  const cv::Mat tex = fl::test::stereo::Texture(900, 700, 6);
+  {
+    fl::LcmLogWriter log(dir.file("in.lcmlog"));
+    const Utime t0 = 2000000000;
+    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0 - 5);
+    log.Write(fl::channels::kCameraToBase, MakeCameraToBase(calib), t0 - 4);
+    cv::Mat l, r;
+    for (int k = 0; k < 12; ++k) {
+      const Utime t = t0 + 100000 * k;
+      fl::test::stereo::PlanePair(tex, calib, 5.0, 0.05 * k, 0.0, &l, &r);
+      log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);
+    }
+    log.Close();
+  }
+  {
+    std::ofstream yaml(dir.file("vo.yaml"));
+    yaml << "keyframe_translation_m: 0.1\nlocal_ba: {enabled: true}\n";
+  }
+  const std::string cmd = bin + " --config " + dir.file("vo.yaml") + " --lcm-url log:" +
+                          dir.file("in.lcmlog") + "," + dir.file("out.lcmlog") +
+                          " --log-level error > " + dir.file("stdout.txt") + " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  fl::LcmLogReader reader(dir.file("out.lcmlog"));
+  fl::LcmLogEvent ev;
+  fusionloc::status_t last_status;
+  int factors = 0;
+  while (reader.Next(&ev)) {
+    const int size = static_cast<int>(ev.data.size());
+    if (ev.channel == "STATUS_FL_STEREO_VO") {
+      ASSERT_EQ(last_status.decode(ev.data.data(), 0, size), size);
+    } else if (ev.channel == fl::channels::kVoFactors) {
+      ++factors;
+    }
+  }
+  EXPECT_GE(factors, 4);
+  EXPECT_EQ(StatusValue(last_status, "local_ba_windows"), factors);
+  EXPECT_EQ(StatusValue(last_status, "local_ba_skipped"), 0);
+  EXPECT_GT(StatusValue(last_status, "local_ba_points"), 20);
+  EXPECT_LT(StatusValue(last_status, "local_ba_rms_px"), 1.0);
+}
+
 // LASER_3D converted to the left camera frame through both mountings: a point on the optical
 // axis 5 m ahead, and a NaN point left out and counted.
 TEST(StereoVoLcm, LaserScanToCameraAppliesTheMountings) {
