@@ -80,6 +80,8 @@ Status RobotDescription::Validate() const {
   if (!s.ok()) return Status::Error("laser." + s.message());
   s = camera.Validate();
   if (!s.ok()) return Status::Error("camera." + s.message());
+  s = laser3d.Validate();
+  if (!s.ok()) return Status::Error("laser3d." + s.message());
   return base.Validate();
 }
 

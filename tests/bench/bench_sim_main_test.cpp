@@ -1,11 +1,13 @@
 // fl-bench-sim end to end on a short run of the `paper` world: every estimate (RBPF alone, VO
 // alone, fused) is reported beside the wheel odometry's own ATE (run <world>_odometry) and read
-// against it (ate_over_odometry = its ATE over the odometry's); the error plot is written.
+// against it (ate_over_odometry = its ATE over the odometry's); the error plot is written; the
+// laser-aided runs (the simulator's 16-line laser) are read against the plain ones.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
 #include <string>
+#include <utility>
 
 #include "bench_json.hpp"
 #include "test_paths.hpp"
@@ -37,6 +39,20 @@ TEST(BenchSimMain, EveryEstimateIsReadAgainstTheWheelOdometry) {
         << run;
   }
   EXPECT_TRUE(std::filesystem::exists(dir.file("png/sim_paper_errors.png")));
+  // The laser-aided runs: every stereo frame (2 Hz over 10 s) had its 16-line scan, and each
+  // run is read against the plain one.
+  EXPECT_EQ(BenchMetric(json, "paper_vo_only_lv", "laser_frames"), 21) << json;
+  EXPECT_GT(BenchMetric(json, "paper_vo_only_lv", "laser_depth_features_mean"), 0) << json;
+  for (const auto& [lv, plain] : {std::pair<std::string, std::string>{"paper_vo_only_lv",
+                                                                      "paper_vo_only"},
+                                  {"paper_fused_lv", "paper_fused"}}) {
+    const double ate = BenchMetric(json, lv, "ate_rmse_m");
+    const double plain_ate = BenchMetric(json, plain, "ate_rmse_m");
+    ASSERT_TRUE(std::isfinite(ate)) << lv << "\n" << json;
+    EXPECT_NEAR(BenchMetric(json, lv, "ate_over_plain"), ate / plain_ate,
+                1e-3 * ate / plain_ate + 1e-6)
+        << lv;
+  }
 }
 
 // --camera-rate-hz overrides the worlds' camera rate and records a benchmark of its own; the VO

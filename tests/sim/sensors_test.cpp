@@ -83,6 +83,73 @@ TEST(LaserModelTest, RangeNoiseHasConfiguredSigma) {
   EXPECT_NEAR(std::sqrt(sum2 / n), 0.1, 0.005);
 }
 
+TEST(Laser3dModelTest, PointsLieOnTheWallAndTheFloor) {
+  // A 2.5 m wall at x = 5 and the floor: every noise-free point is on one of them, at the
+  // azimuth and elevation of its beam; the upward lines above the wall's top see nothing.
+  const World world = WallWorld(5.0);
+  Laser3dOptions o;
+  o.enabled = true;
+  const Laser3dModel laser(o);
+  const Pose2 pose(0.5, -1.0, 0.2);
+  std::vector<Eigen::Vector3f> points;
+  laser.Scan(world, pose, nullptr, &points);
+  const Pose2 T_world_laser = pose * Pose2(o.x_m, o.y_m, 0.0);
+  int on_wall = 0, on_floor = 0;
+  for (const Eigen::Vector3f& p : points) {
+    const Eigen::Vector2d xy = T_world_laser * Eigen::Vector2d(p.x(), p.y());
+    const double z = o.z_m + p.z();
+    if (std::abs(xy.x() - 5.0) < 1e-4) {
+      ++on_wall;
+      EXPECT_GE(z, -1e-4);
+      EXPECT_LE(z, 2.5 + 1e-4);
+    } else {
+      ++on_floor;
+      EXPECT_NEAR(z, 0.0, 1e-4) << "neither on the wall nor on the floor: " << p.transpose();
+      EXPECT_LT(xy.x(), 5.0);
+    }
+    const double range = p.cast<double>().norm();
+    EXPECT_GE(range, o.min_range_m);
+    EXPECT_LE(range, o.max_range_m);
+  }
+  EXPECT_GT(on_wall, 500);
+  EXPECT_GT(on_floor, 500);
+  // Straight ahead on the level-most line (elevation -1 deg of 16 lines over 30 deg): the wall
+  // at (5 - x_laser) / cos(heading) horizontally.
+  const int line = 7;
+  const double e = laser.LineElevation(line);
+  EXPECT_NEAR(e, (-15.0 + 30.0 * 7 / 15) * M_PI / 180.0, 1e-12);
+  std::vector<Eigen::Vector3f> only;
+  Laser3dOptions one = o;
+  one.lines = 1;
+  one.vertical_fov_deg = 0.0;
+  Laser3dModel(one).Scan(world, Pose2(0, 0, 0), nullptr, &only);
+  ASSERT_FALSE(only.empty());
+  EXPECT_NEAR(only.front().x(), 5.0 - o.x_m, 1e-4);  // azimuth 0 first
+  EXPECT_NEAR(only.front().y(), 0.0, 1e-6);
+}
+
+TEST(Laser3dModelTest, RangeNoiseAlongTheBeamIsSeeded) {
+  const World world = WallWorld(5.0);
+  Laser3dOptions o;
+  o.enabled = true;
+  const Laser3dModel laser(o);
+  std::vector<Eigen::Vector3f> exact, a, b;
+  laser.Scan(world, Pose2(0, 0, 0), nullptr, &exact);
+  Rng rng1(3), rng2(3);
+  laser.Scan(world, Pose2(0, 0, 0), &rng1, &a);
+  laser.Scan(world, Pose2(0, 0, 0), &rng2, &b);
+  ASSERT_EQ(a.size(), exact.size());
+  EXPECT_EQ(a, b);
+  double sum2 = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    const double d = a[i].cast<double>().norm() - exact[i].cast<double>().norm();
+    sum2 += d * d;
+    // Along the beam: the direction is unchanged.
+    EXPECT_LT((a[i].normalized() - exact[i].normalized()).norm(), 1e-5);
+  }
+  EXPECT_NEAR(std::sqrt(sum2 / a.size()), o.range_sigma_m, 0.1 * o.range_sigma_m);
+}
+
 TEST(CameraModelTest, DepthAtKnownPixels) {
   const World world = WallWorld(5.0);
   CameraOptions o;

@@ -3,11 +3,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <iterator>
 #include <map>
+#include <optional>
 
 #include "fusionloc/common/lcm_interface.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "sim_fixtures.hpp"
 #include "test_paths.hpp"
 
@@ -23,6 +26,49 @@ SimOptions Short(double duration_s) {
   SimOptions o;
   o.duration_s = duration_s;
   return o;
+}
+
+TEST(SimulatorTest, TheMultiLineLaserAgreesWithTheCameraThroughThePublishedMountings) {
+  // LASER_3D points moved into the left camera through LASER_3D_TO_BASE and CAMERA_TO_BASE
+  // and projected with STEREO_CALIBRATION land where the camera sees the same depth.
+  SimOptions o = DefaultOptionsForWorld("paper");
+  o.duration_s = 2.0;
+  o.laser3d.enabled = true;
+  o.laser3d.range_sigma_m = 0.0;
+  Simulator sim(o);
+  SimFrame f;
+  std::optional<Eigen::Isometry3d> T_base_laser3d, T_base_camera;
+  int scans = 0, checked = 0;
+  std::vector<double> rel_error;
+  while (sim.Step(&f)) {
+    if (f.laser_3d_to_base) T_base_laser3d = fl::TransformFromLcm(*f.laser_3d_to_base);
+    if (f.camera_to_base) T_base_camera = fl::TransformFromLcm(*f.camera_to_base);
+    if (!f.laser_3d) continue;
+    ++scans;
+    EXPECT_EQ(f.laser_3d->utime, f.utime);
+    EXPECT_EQ(f.laser_3d->num_points, static_cast<int32_t>(f.laser_3d->x.size()));
+    if (!f.stereo || checked > 0) continue;
+    ASSERT_TRUE(T_base_laser3d && T_base_camera);
+    const Eigen::Isometry3d T_camera_laser = T_base_camera->inverse() * *T_base_laser3d;
+    std::vector<float> depth;
+    sim.camera().RenderDepth(sim.world(), f.T_world_base, CameraModel::kLeft, &depth);
+    const CameraOptions& c = o.camera;
+    for (int i = 0; i < f.laser_3d->num_points; ++i) {
+      const Eigen::Vector3d p = T_camera_laser * Eigen::Vector3d(f.laser_3d->x[i], f.laser_3d->y[i],
+                                                                 f.laser_3d->z[i]);
+      if (p.z() < 0.5) continue;
+      const int u = static_cast<int>(std::lround(c.fx * p.x() / p.z() + c.cx));
+      const int v = static_cast<int>(std::lround(c.fx * p.y() / p.z() + c.cy));
+      if (u < 0 || v < 0 || u >= c.width || v >= c.height) continue;
+      const double d = depth[static_cast<size_t>(v) * c.width + u];
+      rel_error.push_back(std::abs(d - p.z()) / p.z());
+      ++checked;
+    }
+  }
+  EXPECT_EQ(scans, 21);  // 10 Hz over 2 s, both ends
+  ASSERT_GT(checked, 500);
+  std::sort(rel_error.begin(), rel_error.end());
+  EXPECT_LT(rel_error[rel_error.size() / 2], 0.01) << "median relative depth difference";
 }
 
 TEST(SimulatorTest, FramesCarryTheMessagesDueWithConsistentTimes) {

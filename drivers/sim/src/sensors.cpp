@@ -51,6 +51,43 @@ void LaserModel::Scan(const World& world, const Pose2& T_world_base, Rng* rng,
 }
 
 // ------------------------------------------------------------------------------------------
+// Multi-line laser
+
+double Laser3dModel::LineElevation(int line) const {
+  const int n = options_.lines;
+  const double fov = options_.vertical_fov_deg * kDegToRad;
+  return n == 1 ? 0.0 : -0.5 * fov + fov * line / (n - 1);
+}
+
+void Laser3dModel::Scan(const World& world, const Pose2& T_world_base, Rng* rng,
+                        std::vector<Eigen::Vector3f>* points) const {
+  points->clear();
+  const Pose2 T_world_laser = T_world_base * Pose2(options_.x_m, options_.y_m, 0.0);
+  const Eigen::Vector2d origin = T_world_laser.translation();
+  const int azimuths = std::max(1, static_cast<int>(std::lround(360.0 / options_.azimuth_step_deg)));
+  std::vector<RayHit> hits;
+  for (int a = 0; a < azimuths; ++a) {
+    const double azimuth = a * options_.azimuth_step_deg * kDegToRad;  // in the laser frame
+    const double heading = T_world_laser.theta + azimuth;
+    const Eigen::Vector2d dir(std::cos(heading), std::sin(heading));  // unit: t is horizontal
+    world.CastAll(origin, dir, 1e-9, &hits);
+    for (int line = 0; line < options_.lines; ++line) {
+      const double e = LineElevation(line);
+      const Surface surface = FirstSurface(world, options_.z_m, std::tan(e), hits);
+      if (surface.kind == Surface::kSky) continue;
+      const double range = surface.t / std::cos(e);  // along the beam
+      if (range < options_.min_range_m || range > options_.max_range_m) continue;
+      // Noise draws only for returns: the scan is deterministic given the seed.
+      const double r = std::max(options_.min_range_m,
+                                range + (rng != nullptr ? rng->Normal(options_.range_sigma_m) : 0.0));
+      points->emplace_back(static_cast<float>(r * std::cos(e) * std::cos(azimuth)),
+                           static_cast<float>(r * std::cos(e) * std::sin(azimuth)),
+                           static_cast<float>(r * std::sin(e)));
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------
 // Camera
 
 Eigen::Vector3d CameraModel::CameraCenterWorld(const Pose2& T_world_base, Eye eye) const {
@@ -63,10 +100,8 @@ Eigen::Vector3d CameraModel::CameraCenterWorld(const Pose2& T_world_base, Eye ey
 // the base's forward and left axes and up(v) = -(v - cy)/fx. Its optical z component is 1, so
 // t is the depth. All rays of an image column share the horizontal part `dir`, so the 2-D
 // crossings (`hits`) are computed once per column and only the heights differ per row.
-double CameraModel::Shade(const World& world, const Eigen::Vector2d& c_xy, double c_z,
-                          const Eigen::Vector2d& dir, const std::vector<RayHit>& hits, double v,
-                          double* depth) const {
-  const double up = -(v - options_.cy) / options_.fx;
+Surface FirstSurface(const World& world, double c_z, double up, const std::vector<RayHit>& hits) {
+  Surface out;
   const double ceiling = world.ceiling_height();
   const double t_floor = up < 0.0 ? c_z / -up : kInf;
   const double t_ceiling = (ceiling > 0.0 && up > 0.0) ? (ceiling - c_z) / up : kInf;
@@ -75,30 +110,56 @@ double CameraModel::Shade(const World& world, const Eigen::Vector2d& c_xy, doubl
     if (h.t_in >= t_limit) break;
     const double z = c_z + up * h.t_in;
     if (z >= 0.0 && z <= h.height) {
-      *depth = h.t_in;
-      const double lambert = std::fabs(kLight.x() * h.normal_x + kLight.y() * h.normal_y);
-      return world.ShapeIntensity(h.shape, h.s, z) * (0.6 + 0.4 * lambert);
+      out.kind = Surface::kFace;
+      out.t = h.t_in;
+      out.z = z;
+      out.hit = &h;
+      return out;
     }
     if (h.solid && up < 0.0 && z > h.height) {
       const double t_lid = (c_z - h.height) / -up;
       if (t_lid < h.t_out) {
-        *depth = t_lid;
-        const Eigen::Vector2d p = c_xy + t_lid * dir;
-        return world.LidIntensity(h.shape, p.x(), p.y());
+        out.kind = Surface::kLid;
+        out.t = t_lid;
+        out.z = h.height;
+        out.hit = &h;
+        return out;
       }
     }
   }
   if (t_floor < t_ceiling) {
-    *depth = t_floor;
-    const Eigen::Vector2d p = c_xy + t_floor * dir;
-    return 0.9 * world.FloorIntensity(p.x(), p.y());
+    out.kind = Surface::kFloor;
+    out.t = t_floor;
+  } else if (t_ceiling < kInf) {
+    out.kind = Surface::kCeiling;
+    out.t = t_ceiling;
+    out.z = ceiling;
   }
-  if (t_ceiling < kInf) {
-    *depth = t_ceiling;
-    const Eigen::Vector2d p = c_xy + t_ceiling * dir;
-    return 0.95 * world.CeilingIntensity(p.x(), p.y());
+  return out;
+}
+
+double CameraModel::Shade(const World& world, const Eigen::Vector2d& c_xy, double c_z,
+                          const Eigen::Vector2d& dir, const std::vector<RayHit>& hits, double v,
+                          double* depth) const {
+  const double up = -(v - options_.cy) / options_.fx;
+  const Surface surface = FirstSurface(world, c_z, up, hits);
+  *depth = surface.t;
+  const Eigen::Vector2d p = c_xy + (std::isfinite(surface.t) ? surface.t : 0.0) * dir;
+  switch (surface.kind) {
+    case Surface::kFace: {
+      const RayHit& h = *surface.hit;
+      const double lambert = std::fabs(kLight.x() * h.normal_x + kLight.y() * h.normal_y);
+      return world.ShapeIntensity(h.shape, h.s, surface.z) * (0.6 + 0.4 * lambert);
+    }
+    case Surface::kLid:
+      return world.LidIntensity(surface.hit->shape, p.x(), p.y());
+    case Surface::kFloor:
+      return 0.9 * world.FloorIntensity(p.x(), p.y());
+    case Surface::kCeiling:
+      return 0.95 * world.CeilingIntensity(p.x(), p.y());
+    case Surface::kSky:
+      break;
   }
-  *depth = kInf;
   return world.CeilingIntensity(0.0, 0.0);  // sky
 }
 

@@ -139,7 +139,11 @@ int main(int argc, char** argv) {
        {"GROUND_TRUTH", "bot_core.pose_t", "true T_world_base, 10 Hz"},
        {"ODOMETRY", "fusionloc.wheel_odometry_t", "10 Hz"},
        {"LASER", "bot_core.planar_lidar_t", "10 Hz, range 0 = no return"},
-       {"STEREO", "bot_core.images_t", "LEFT+RIGHT gray 640x480, 2 Hz"}});
+       {"STEREO", "bot_core.images_t", "LEFT+RIGHT gray 640x480, 2 Hz"},
+       {"LASER_3D_TO_BASE", "bot_core.rigid_transform_t",
+        "T_base_laser3d, first and every 1 s (laser3d.enabled)"},
+       {"LASER_3D", "fusionloc.laser_scan_3d_t",
+        "16-line laser, 10 Hz, before the stereo pair of its step (laser3d.enabled)"}});
   cli.AddEpilog(
       "\nExamples:\n"
       "  fl-sim --log paper.lcmlog                       # 100 s paper world, seed 1\n"

@@ -104,6 +104,24 @@ Status LaserOptions::Validate() const {
   return c.status();
 }
 
+Status Laser3dOptions::Validate() const {
+  Checker c("laser3d.");
+  c.Positive("rate_hz", rate_hz, " Hz");
+  c.Range("lines", lines, 1, 128);
+  c.Range("vertical_fov_deg", vertical_fov_deg, 0.0, 90.0, " deg");
+  c.Range("azimuth_step_deg", azimuth_step_deg, 0.05, 10.0, " deg");
+  c.Range("range_sigma_m", range_sigma_m, 0.0, 1.0, " m");
+  c.Range("min_range_m", min_range_m, 0.0, 5.0, " m");
+  c.Range("max_range_m", max_range_m, min_range_m + 0.1, 200.0, " m");
+  if (enabled) {
+    c.Range("x_m", x_m, -2.0, 2.0, " m");
+    c.Range("y_m", y_m, -2.0, 2.0, " m");
+    c.Range("z_m", z_m, 0.1, 2.4,
+            " m (the robot description's laser3d.xyz_m: above the floor, below the walls' top)");
+  }
+  return c.status();
+}
+
 Status CameraOptions::Validate() const {
   Checker c("camera.");
   c.Positive("rate_hz", rate_hz, " Hz");
@@ -139,12 +157,20 @@ Status SimOptions::SetMounting(const RobotDescription& robot) {
   camera.x_m = robot.camera.xyz_m.at(0);
   camera.y_m = robot.camera.xyz_m.at(1);
   camera.z_m = robot.camera.xyz_m.at(2);
+  if (robot.laser3d.rpy_deg != level) {
+    return Status::Error("robot '" + robot.name +
+                         "': laser3d.rpy_deg must be [0, 0, 0] for the simulator (it models a "
+                         "level multi-line laser)");
+  }
+  laser3d.x_m = robot.laser3d.xyz_m.at(0);
+  laser3d.y_m = robot.laser3d.xyz_m.at(1);
+  laser3d.z_m = robot.laser3d.xyz_m.at(2);
   return Validate();
 }
 
 Status SimOptions::Validate() const {
   for (const Status& s : {world.Validate(), robot.Validate(), odometry.Validate(),
-                          laser.Validate(), camera.Validate()}) {
+                          laser.Validate(), camera.Validate(), laser3d.Validate()}) {
     if (!s.ok()) return s;
   }
   Checker c("");
@@ -162,6 +188,7 @@ Status SimOptions::Validate() const {
   for (const Rate& r : {Rate{"odometry.rate_hz", odometry.rate_hz},
                         Rate{"laser.rate_hz", laser.rate_hz},
                         Rate{"camera.rate_hz", camera.rate_hz},
+                        Rate{"laser3d.rate_hz", laser3d.rate_hz},
                         Rate{"calibration_period_s (as a rate)", 1.0 / calibration_period_s}}) {
     const double period = 1.0 / (r.hz * step_s);
     if (period < 0.999999 || std::fabs(period - std::round(period)) > 1e-6) {

@@ -110,13 +110,16 @@ Simulator::Simulator(const SimOptions& options)
       world_(World::Build(options_)),
       laser_(options_.laser),
       camera_(options_.camera),
+      laser3d_(options_.laser3d),
       follower_(world_.route(), options_.robot),
       odometry_rng_(Hash3(static_cast<uint64_t>(options_.seed), 10, 0)),
       laser_rng_(Hash3(static_cast<uint64_t>(options_.seed), 11, 0)),
       camera_rng_(Hash3(static_cast<uint64_t>(options_.seed), 12, 0)),
+      laser3d_rng_(Hash3(static_cast<uint64_t>(options_.seed), 13, 0)),
       laser_period_(options_.PeriodSteps(options_.laser.rate_hz)),
       odometry_period_(options_.PeriodSteps(options_.odometry.rate_hz)),
       camera_period_(options_.PeriodSteps(options_.camera.rate_hz)),
+      laser3d_period_(options_.PeriodSteps(options_.laser3d.rate_hz)),
       calibration_period_(options_.PeriodSteps(1.0 / options_.calibration_period_s)),
       pose_(StartPose(world_)),
       odom_last_truth_(pose_) {}
@@ -140,6 +143,12 @@ bot_core::rigid_transform_t Simulator::LaserToBase(Utime utime) const {
   Mount laser;  // level, 0 rad beam along base x
   laser.xyz_m = {options_.laser.x_m, options_.laser.y_m, options_.laser.z_m};
   return TransformToLcm(laser.T_base_sensor(), utime);
+}
+
+bot_core::rigid_transform_t Simulator::Laser3dToBase(Utime utime) const {
+  Mount laser3d;  // level: x forward, y left, z up
+  laser3d.xyz_m = {options_.laser3d.x_m, options_.laser3d.y_m, options_.laser3d.z_m};
+  return TransformToLcm(laser3d.T_base_sensor(), utime);
 }
 
 bot_core::rigid_transform_t Simulator::CameraToBase(Utime utime) const {
@@ -169,6 +178,7 @@ bool Simulator::Step(SimFrame* out) {
 
   if (k % calibration_period_ == 0) {
     if (options_.laser.enabled) f.laser_to_base = LaserToBase(f.utime);
+    if (options_.laser3d.enabled) f.laser_3d_to_base = Laser3dToBase(f.utime);
     if (options_.camera.enabled) {
       f.camera_to_base = CameraToBase(f.utime);
       f.calibration = Calibration(f.utime);
@@ -237,6 +247,25 @@ bool Simulator::Step(SimFrame* out) {
     scan.rad0 = static_cast<float>(options_.laser.first_angle_deg * M_PI / 180.0);
     scan.radstep = static_cast<float>(options_.laser.step_deg * M_PI / 180.0);
     f.laser = std::move(scan);
+  }
+
+  if (options_.laser3d.enabled && k % laser3d_period_ == 0) {
+    std::vector<Eigen::Vector3f> points;
+    laser3d_.Scan(world_, pose_, &laser3d_rng_, &points);
+    fusionloc::laser_scan_3d_t scan;
+    scan.utime = f.utime;
+    scan.frame = "laser3d";
+    scan.num_points = static_cast<int32_t>(points.size());
+    scan.x.reserve(points.size());
+    scan.y.reserve(points.size());
+    scan.z.reserve(points.size());
+    for (const Eigen::Vector3f& p : points) {
+      scan.x.push_back(p.x());
+      scan.y.push_back(p.y());
+      scan.z.push_back(p.z());
+    }
+    scan.intensity.assign(points.size(), 0.5f);  // the simulator has no reflectance
+    f.laser_3d = std::move(scan);
   }
 
   if (options_.camera.enabled && k % camera_period_ == 0) {

@@ -105,6 +105,8 @@ std::map<std::string, int64_t> SimSchedule(const sim::SimOptions& o) {
   n["ODOMETRY"] = count(o.PeriodSteps(o.odometry.rate_hz));
   n["LASER"] = o.laser.enabled ? count(o.PeriodSteps(o.laser.rate_hz)) : 0;
   n["STEREO"] = o.camera.enabled ? count(o.PeriodSteps(o.camera.rate_hz)) : 0;
+  n["LASER_3D_TO_BASE"] = o.laser3d.enabled ? every : 0;
+  n["LASER_3D"] = o.laser3d.enabled ? count(o.PeriodSteps(o.laser3d.rate_hz)) : 0;
   return n;
 }
 

@@ -14,6 +14,7 @@
 //   name: sim
 //   laser:  {xyz_m: [0.15, 0, 0.3], rpy_deg: [0, 0, 0]}
 //   camera: {xyz_m: [0.2, 0.06, 0.5], rpy_deg: [-90, 0, -90]}   # optical z = base x
+//   laser3d: {xyz_m: [0.1, 0, 0.9], rpy_deg: [0, 0, 0]}          # optional multi-line laser
 //   base:   {wheel_radius_m: 0.035, track_m: 0.23, ticks_per_revolution: 2578.33}
 #pragma once
 
@@ -60,6 +61,9 @@ struct RobotDescription {
   std::string name;   // e.g. "sim", "kitti", "turtlebot2"
   Mount laser;        // T_base_laser
   Mount camera;       // T_base_camera (left camera, optical frame)
+  // T_base_laser3d: a multi-line (3D) laser, x forward, y left, z up (optional; the simulator's
+  // laser3d, published on LASER_3D_TO_BASE). All zero: not described.
+  Mount laser3d;
   BaseGeometry base;  // wheel geometry (optional)
 
   template <class A>
@@ -67,6 +71,7 @@ struct RobotDescription {
     a->Visit("name", &name);
     a->Visit("laser", &laser);
     a->Visit("camera", &camera);
+    a->Visit("laser3d", &laser3d);
     a->Visit("base", &base);
   }
   Status Validate() const;

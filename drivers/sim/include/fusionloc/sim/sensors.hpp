@@ -3,7 +3,9 @@
 // Gaussian intensity noise).
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "fusionloc/common/geometry.hpp"
@@ -30,6 +32,35 @@ class LaserModel {
 
  private:
   LaserOptions options_;
+};
+
+// The first surface along the ray c + t (dir, up) from a point at height c_z: dir is the
+// ray's horizontal part (any length; t counts in its units), up its rise per unit of dir; hits
+// are World::CastAll's crossings of the horizontal ray, sorted. The camera's pixels and the
+// multi-line laser's beams both use it.
+struct Surface {
+  enum Kind { kSky, kFace, kLid, kFloor, kCeiling };
+  Kind kind = kSky;
+  double t = std::numeric_limits<double>::infinity();  // +inf for the sky
+  double z = 0.0;                                       // [m] height of the point
+  const RayHit* hit = nullptr;                          // kFace, kLid: the shape crossed
+};
+Surface FirstSurface(const World& world, double c_z, double up, const std::vector<RayHit>& hits);
+
+// The multi-line laser (Laser3dOptions): every beam's first surface, plus Gaussian range
+// noise along the beam.
+class Laser3dModel {
+ public:
+  explicit Laser3dModel(const Laser3dOptions& options) : options_(options) {}
+  // Points [m] in the laser frame (x forward, y left, z up) of every beam with a return
+  // within [min_range, max_range], at base pose T_world_base; rng == nullptr: noise-free.
+  void Scan(const World& world, const Pose2& T_world_base, Rng* rng,
+            std::vector<Eigen::Vector3f>* points) const;
+  double LineElevation(int line) const;  // [rad], line 0 the lowest
+  const Laser3dOptions& options() const { return options_; }
+
+ private:
+  Laser3dOptions options_;
 };
 
 class CameraModel {

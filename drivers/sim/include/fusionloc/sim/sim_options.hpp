@@ -111,6 +111,39 @@ struct LaserOptions {
   Status Validate() const;
 };
 
+// Multi-line (3D) laser, VLP-16-like, for the stereo VO's laser-aided mode: `lines` scan
+// lines evenly over [-vertical_fov/2, +vertical_fov/2] (elevation), a full turn in azimuth at
+// azimuth_step_deg, the whole scan at one instant (no motion skew). Points in the scanner's
+// frame (x forward, y left, z up) on LASER_3D, its mounting on LASER_3D_TO_BASE. Off by
+// default (bench sim's laser-aided runs turn it on).
+struct Laser3dOptions {
+  bool enabled = false;            // publish LASER_3D and LASER_3D_TO_BASE
+  double rate_hz = 10.0;           // [Hz] must divide the step rate
+  int lines = 16;                  // [count] scan lines
+  double vertical_fov_deg = 30.0;  // [deg] from the lowest to the highest line
+  double azimuth_step_deg = 0.4;   // [deg] between the points of a line (900 per turn)
+  double range_sigma_m = 0.03;     // [m] Gaussian range noise (along the beam)
+  double min_range_m = 0.5;        // [m] no return closer (the robot itself)
+  double max_range_m = 40.0;       // [m] no return beyond
+  // Mounting, from the robot description's laser3d (SimOptions::SetMounting; level only).
+  double x_m = 0.1;  // [m] in the base frame
+  double y_m = 0.0;  // [m]
+  double z_m = 0.9;  // [m]
+
+  template <class A>
+  void Serialize(A* a) {
+    a->Visit("enabled", &enabled);
+    a->Visit("rate_hz", &rate_hz);
+    a->Visit("lines", &lines);
+    a->Visit("vertical_fov_deg", &vertical_fov_deg);
+    a->Visit("azimuth_step_deg", &azimuth_step_deg);
+    a->Visit("range_sigma_m", &range_sigma_m);
+    a->Visit("min_range_m", &min_range_m);
+    a->Visit("max_range_m", &max_range_m);
+  }
+  Status Validate() const;
+};
+
 // Rectified stereo pair (Bumblebee2-like), rendered by ray casting; the optical axis is level
 // and points along base x. Left camera pose in the base frame: (x_m, y_m, z_m) from the robot
 // description; the right camera is `baseline_m` to its right.
@@ -157,6 +190,7 @@ struct SimOptions {
   OdometryOptions odometry;
   LaserOptions laser;
   CameraOptions camera;
+  Laser3dOptions laser3d;
 
   template <class A>
   void Serialize(A* a) {
@@ -170,6 +204,7 @@ struct SimOptions {
     a->Visit("odometry", &odometry);
     a->Visit("laser", &laser);
     a->Visit("camera", &camera);
+    a->Visit("laser3d", &laser3d);
   }
   // Takes the laser's and the camera's mounting from a robot description
   // (config/robot/sim.yaml). The simulator models a level laser and a level camera looking

@@ -27,6 +27,7 @@
 #include "fusionloc/sim/sensors.hpp"
 #include "fusionloc/sim/sim_options.hpp"
 #include "fusionloc/sim/world.hpp"
+#include "fusionloc/laser_scan_3d_t.hpp"
 #include "fusionloc/stereo_calibration_t.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
 
@@ -42,10 +43,12 @@ struct SimFrame {
   // Messages due at this step (publish in this order).
   std::optional<bot_core::rigid_transform_t> laser_to_base;   // T_base_laser (laser enabled)
   std::optional<bot_core::rigid_transform_t> camera_to_base;  // T_base_camera (camera enabled)
+  std::optional<bot_core::rigid_transform_t> laser_3d_to_base;  // T_base_laser3d (laser3d)
   std::optional<fusionloc::stereo_calibration_t> calibration;  // (camera enabled)
   std::optional<bot_core::pose_t> ground_truth;
   std::optional<fusionloc::wheel_odometry_t> odometry;
   std::optional<bot_core::planar_lidar_t> laser;
+  std::optional<fusionloc::laser_scan_3d_t> laser_3d;  // before the stereo pair of its step
   std::optional<bot_core::images_t> stereo;
 };
 
@@ -84,6 +87,7 @@ class Simulator {
   // The mountings of the robot description, as published on LASER_TO_BASE / CAMERA_TO_BASE.
   bot_core::rigid_transform_t LaserToBase(Utime utime) const;
   bot_core::rigid_transform_t CameraToBase(Utime utime) const;
+  bot_core::rigid_transform_t Laser3dToBase(Utime utime) const;  // LASER_3D_TO_BASE
   const LaserModel& laser() const { return laser_; }
   const CameraModel& camera() const { return camera_; }
 
@@ -92,10 +96,11 @@ class Simulator {
   World world_;
   LaserModel laser_;
   CameraModel camera_;
+  Laser3dModel laser3d_;
   RouteFollower follower_;
-  Rng odometry_rng_, laser_rng_, camera_rng_;
+  Rng odometry_rng_, laser_rng_, camera_rng_, laser3d_rng_;
   int64_t next_step_ = 0;
-  int64_t laser_period_, odometry_period_, camera_period_, calibration_period_;
+  int64_t laser_period_, odometry_period_, camera_period_, laser3d_period_, calibration_period_;
   Pose2 pose_;       // ground truth
   Pose2 odom_pose_;  // noisy integrated
   Pose2 odom_last_truth_;  // truth at the last odometry message
@@ -109,10 +114,12 @@ template <class Fn>
 void VisitMessages(const SimFrame& f, Fn&& fn) {
   if (f.laser_to_base) fn(channels::kLaserToBase, *f.laser_to_base);
   if (f.camera_to_base) fn(channels::kCameraToBase, *f.camera_to_base);
+  if (f.laser_3d_to_base) fn(channels::kLaser3dToBase, *f.laser_3d_to_base);
   if (f.calibration) fn(channels::kStereoCalibration, *f.calibration);
   if (f.ground_truth) fn(channels::kGroundTruth, *f.ground_truth);
   if (f.odometry) fn(channels::kOdometry, *f.odometry);
   if (f.laser) fn(channels::kLaser, *f.laser);
+  if (f.laser_3d) fn(channels::kLaser3d, *f.laser_3d);
   if (f.stereo) fn(channels::kStereo, *f.stereo);
 }
 

@@ -71,7 +71,8 @@ class SimPipeline {
 };
 
 // Messages of each channel the simulator publishes for `o` (its deterministic schedule):
-// GROUND_TRUTH, STEREO_CALIBRATION, CAMERA_TO_BASE, LASER_TO_BASE, ODOMETRY, LASER, STEREO.
+// GROUND_TRUTH, STEREO_CALIBRATION, CAMERA_TO_BASE, LASER_TO_BASE, ODOMETRY, LASER, STEREO,
+// LASER_3D_TO_BASE and LASER_3D (0 when off).
 std::map<std::string, int64_t> SimSchedule(const sim::SimOptions& o);
 
 }  // namespace fl::bench
