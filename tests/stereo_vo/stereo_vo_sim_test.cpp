@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
 #include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/sim/simulator.hpp"
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
 #include "fusionloc/stereo_vo/stereo_vo_lcm.hpp"
@@ -242,6 +244,58 @@ TEST(StereoVoSim, TheLocalBundleAdjustmentAdjustsEveryKeyframeAndKeepsTheDriftLo
             << yaw_error_deg << " deg\n";
   EXPECT_LT(end_error / path, 0.01);
   EXPECT_LT(yaw_error_deg, 2.0);
+}
+
+TEST(StereoVoSim, TheSimulatorsMultiLineLaserGivesFeaturesTheirDepth) {
+  // The first test's 12 s with the simulator's 16-line laser and the laser-aided mode: every
+  // frame gets its scan through the published mountings (as fl-stereo-vo --laser-aided), some
+  // features take their depth from it, and the path still drifts < 1 %.
+  fl::sim::SimOptions so = CameraOnly(12.0, 5.0);
+  so.laser3d.enabled = true;
+  fl::sim::Simulator sim(so);
+  StereoVoOptions opts;
+  opts.laser_depth.enabled = true;
+  std::unique_ptr<StereoVo> vo;
+  std::optional<Eigen::Isometry3d> T_base_laser3d;
+  std::optional<fusionloc::laser_scan_3d_t> scan;
+  fl::sim::SimFrame frame;
+  Eigen::Isometry3d T_world_base0 = Eigen::Isometry3d::Identity(), T_gt = T_world_base0;
+  Eigen::Isometry3d T_vo = Eigen::Isometry3d::Identity();
+  double path = 0;
+  int frames = 0, with_scan = 0, depth_features = 0;
+  while (sim.Step(&frame)) {
+    if (frame.calibration && !vo) {
+      vo = std::make_unique<StereoVo>(opts,
+                                      CalibrationFromLcm(*frame.calibration, *frame.camera_to_base));
+    }
+    if (frame.laser_3d_to_base) T_base_laser3d = fl::TransformFromLcm(*frame.laser_3d_to_base);
+    if (frame.laser_3d) scan = *frame.laser_3d;
+    if (!frame.stereo || !vo) continue;
+    ASSERT_TRUE(scan && T_base_laser3d) << "the scan comes before the pair of its step";
+    int64_t non_finite = 0;
+    const LaserCloud cloud = LaserScanToCamera(
+        *scan, vo->calibration().T_base_camera.inverse() * *T_base_laser3d, &non_finite);
+    EXPECT_EQ(non_finite, 0);
+    cv::Mat left, right;
+    ASSERT_TRUE(StereoImagesToGray(*frame.stereo, &left, &right).ok());
+    const StereoVoResult r = vo->AddStereoFrame(frame.stereo->utime, left, right, &cloud);
+    if (frames++ == 0) T_world_base0 = frame.T_world_base.ToIsometry3();
+    else EXPECT_EQ(r.state, TrackingState::kTracked) << r.message;
+    with_scan += r.laser_message.empty();
+    depth_features += r.stats.laser_depth_cur;
+    const Eigen::Isometry3d T = T_world_base0.inverse() * frame.T_world_base.ToIsometry3();
+    path += (T.translation() - T_gt.translation()).norm();
+    T_gt = T;
+    T_vo = r.T_world_base;
+  }
+  ASSERT_GT(frames, 50);
+  EXPECT_EQ(with_scan, frames);
+  EXPECT_GT(depth_features, frames) << "at least one laser-depth feature a frame on average";
+  const double end_error = (T_vo.translation() - T_gt.translation()).norm();
+  std::cout << "laser-aided: " << depth_features << " laser-depth features in " << frames
+            << " frames, end-point error " << 100.0 * end_error / path << " % of " << path
+            << " m\n";
+  EXPECT_LT(end_error / path, 0.01);
 }
 
 }  // namespace
