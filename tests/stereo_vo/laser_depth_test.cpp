@@ -121,9 +121,37 @@ TEST(StereoVoLaserDepthTest, FeatureAcrossADepthDiscontinuityIsRejected) {
   ASSERT_GT(line.size(), 100u);
   const LaserDepthMap line_map(LaserDepthOptions(), cam, 640, 480, line);
   EXPECT_EQ(line_map.Associate(320.0, 200.0, -1.0, 0.0).verdict, LaserDepthVerdict::kInconsistent);
-  const FeatureDepth on_line = line_map.Associate(450.0, 200.0, -1.0, 0.0);
+  const FeatureDepth on_line = line_map.Associate(450.0, 201.0, -1.0, 0.0);
   EXPECT_EQ(on_line.verdict, LaserDepthVerdict::kOk);
   EXPECT_NEAR(on_line.depth_m, 15.0, 1e-3);
+}
+
+TEST(StereoVoLaserDepthTest, AFeatureOffItsScanLineGetsNoDepthFromIt) {
+  // The floor 0.5 m below the camera (depth changes fast across the rows) seen by one scan line
+  // at v = 300.5: a feature on the line gets its depth, one 3 px off it does not (there the
+  // depth is 5 % different, and the line says nothing about it).
+  const StereoCamera cam = Camera();
+  std::vector<Eigen::Vector3f> line;
+  const double v_line = 300.5, y = 0.5;
+  const double z_line = cam.fy * y / (v_line - cam.cy);
+  for (double u = 100; u < 540; u += 2.0) {
+    const double x = (u - cam.cx) * z_line / cam.fx;
+    line.emplace_back(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z_line));
+  }
+  const LaserDepthMap map(LaserDepthOptions(), cam, 640, 480, line);
+  const FeatureDepth on = map.Associate(320.0, 300.8, -1.0, 0.0);
+  EXPECT_EQ(on.verdict, LaserDepthVerdict::kOk);
+  EXPECT_NEAR(on.depth_m, z_line, 1e-3);
+  const FeatureDepth off = map.Associate(320.0, 303.5, -1.0, 0.0);
+  EXPECT_EQ(off.verdict, LaserDepthVerdict::kInconsistent) << off.laser_depth_m;
+  EXPECT_EQ(off.source, DepthSource::kNone);
+  LaserDepthOptions loose;
+  loose.max_line_offset_px = 5.0;  // the old rule: the line's depth, 5 % off the truth there
+  const FeatureDepth old_rule = LaserDepthMap(loose, cam, 640, 480, line).Associate(320.0, 303.5,
+                                                                                    -1.0, 0.0);
+  EXPECT_EQ(old_rule.verdict, LaserDepthVerdict::kOk);
+  const double z_true = cam.fy * y / (303.5 - cam.cy);
+  EXPECT_GT(std::abs(old_rule.depth_m - z_true) / z_true, 0.04);
 }
 
 TEST(StereoVoLaserDepthTest, SparsePatchGivesNoLaserDepth) {

@@ -19,9 +19,10 @@ fl::Status LaserDepthOptions::Validate() const {
   if (!(min_plane_spread > 0 && min_plane_spread < 1)) {
     return fl::Status::Error("laser_depth.min_plane_spread must be in (0, 1)");
   }
-  if (!(max_plane_residual_rel > 0 && max_depth_spread_rel > 0)) {
+  if (!(max_plane_residual_rel > 0 && max_depth_spread_rel > 0 && max_line_offset_px >= 0)) {
     return fl::Status::Error(
-        "laser_depth.max_plane_residual_rel and max_depth_spread_rel must be > 0");
+        "laser_depth.max_plane_residual_rel and max_depth_spread_rel must be > 0, "
+        "max_line_offset_px >= 0");
   }
   if (!(range_sigma_m > 0 && stereo_disparity_sigma_px > 0 && max_stereo_disagreement_sigma > 0 &&
         point_lateral_sigma_px > 0)) {
@@ -90,6 +91,22 @@ LaserDepthMap::LaserDepthMap(const LaserDepthOptions& options, const StereoCamer
     pixels_[at] = px[k];
     points_[at] = points_camera[static_cast<size_t>(kept[k])];
   }
+}
+
+double LaserDepthMap::LineOffsetPx(const std::vector<std::pair<double, int>>& near, double u,
+                                   double v) const {
+  // Principal direction of the neighbours' pixels; the feature's distance across it.
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const auto& [d2, i] : near) mean += pixels_[static_cast<size_t>(i)].cast<double>();
+  mean /= static_cast<double>(near.size());
+  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+  for (const auto& [d2, i] : near) {
+    const Eigen::Vector2d d = pixels_[static_cast<size_t>(i)].cast<double>() - mean;
+    scatter += d * d.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(scatter);
+  const Eigen::Vector2d across = eig.eigenvectors().col(0);  // smallest spread: the normal
+  return std::abs(across.dot(Eigen::Vector2d(u, v) - mean));
 }
 
 FeatureDepth LaserDepthMap::Associate(double u, double v, double stereo_depth_m,
@@ -175,7 +192,10 @@ FeatureDepth LaserDepthMap::Associate(double u, double v, double stereo_depth_m,
     }
     z /= wsum;
     spread_sigma = 0.5 * (zmax - zmin);
-    consistent = zmax - zmin <= options_.max_depth_spread_rel * z;
+    // The line's depth holds along it, not across it (on the floor, 5 m away, the depth changes
+    // by ~2.5 % a pixel across a scan line): the feature must lie on the line in the image.
+    consistent = zmax - zmin <= options_.max_depth_spread_rel * z &&
+                 LineOffsetPx(near, u, v) <= options_.max_line_offset_px;
   }
   out.laser_depth_m = z;
   if (!consistent) {

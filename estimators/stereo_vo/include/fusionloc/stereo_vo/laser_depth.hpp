@@ -19,7 +19,8 @@
 //      one scan line), the depth is the ray's intersection with it and the neighbours' largest
 //      distance to the plane must be <= max_plane_residual_rel * depth; otherwise (points
 //      along one line) the depth is the inverse-distance-weighted mean of the neighbours'
-//      depths and their spread (max - min) must be <= max_depth_spread_rel * depth. A failed
+//      depths, their spread (max - min) must be <= max_depth_spread_rel * depth and the feature
+//      must lie within max_line_offset_px of the line in the image. A failed
 //      test is a discontinuity ("inconsistent");
 //   4. sigma = sqrt(range_sigma_m^2 + (plane residual RMS or depth spread / 2)^2);
 //   5. with a stereo depth: |z_laser - z_stereo| <= max_stereo_disagreement_sigma *
@@ -47,6 +48,9 @@ struct LaserDepthOptions {
   double min_plane_spread = 0.05;        // [-] eigenvalue ratio below which the patch is a line
   double max_plane_residual_rel = 0.02;  // [-] largest plane residual / depth (discontinuity)
   double max_depth_spread_rel = 0.05;    // [-] (max - min depth) / depth along one line
+  // [px] on one line: largest image distance of the feature across the line (its depth is
+  // known along the line only)
+  double max_line_offset_px = 1.0;
   double range_sigma_m = 0.03;           // [m] laser range noise (HDL-64E: about 2 cm)
   double max_stereo_disagreement_sigma = 3.0;  // [-] allowed |z_laser - z_stereo| in sigmas
   double stereo_disparity_sigma_px = 0.3;      // [px] disparity noise for the stereo depth sigma
@@ -68,6 +72,7 @@ struct LaserDepthOptions {
     a->Visit("min_plane_spread", &min_plane_spread);
     a->Visit("max_plane_residual_rel", &max_plane_residual_rel);
     a->Visit("max_depth_spread_rel", &max_depth_spread_rel);
+    a->Visit("max_line_offset_px", &max_line_offset_px);
     a->Visit("range_sigma_m", &range_sigma_m);
     a->Visit("max_stereo_disagreement_sigma", &max_stereo_disagreement_sigma);
     a->Visit("stereo_disparity_sigma_px", &stereo_disparity_sigma_px);
@@ -128,6 +133,8 @@ class LaserDepthMap {
   std::vector<Eigen::Vector2f> pixels_;  // sorted by cell
   std::vector<Eigen::Vector3f> points_;
   std::vector<int> cell_start_;  // cols_ * rows_ + 1 offsets into pixels_ / points_
+  // Image distance of (u, v) across the line through the neighbours' pixels [px].
+  double LineOffsetPx(const std::vector<std::pair<double, int>>& near, double u, double v) const;
 };
 
 }  // namespace fl::vo
