@@ -4,9 +4,12 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
+
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 
@@ -213,53 +216,79 @@ TEST(StereoVoLcm, ProcessReplaysALog) {
   EXPECT_TRUE(saw_rectified_error) << "status should report the unrectified calibration";
 }
 
+// A log of `frames` stereo pairs of a textured plane 5 m ahead, the rig moving 5 cm to the
+// right a frame (10 Hz), after the calibration and mounting; before_frame(log, k, t) may add
+// messages before pair k.
+void WritePlaneLog(const std::string& path, const StereoCalibration& calib, uint64_t texture_seed,
+                   int frames,
+                   const std::function<void(fl::LcmLogWriter*, int, Utime)>& before_frame) {
+  const cv::Mat tex = fl::test::stereo::Texture(900, 700, texture_seed);
+  fl::LcmLogWriter log(path);
+  const Utime t0 = 2000000000;
+  log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0 - 5);
+  log.Write(fl::channels::kCameraToBase, MakeCameraToBase(calib), t0 - 4);
+  cv::Mat l, r;
+  for (int k = 0; k < frames; ++k) {
+    const Utime t = t0 + 100000 * k;
+    if (before_frame) before_frame(&log, k, t);
+    fl::test::stereo::PlanePair(tex, calib, 5.0, 0.05 * k, 0.0, &l, &r);
+    log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);
+  }
+  log.Close();
+}
+
+// fl-stereo-vo with the options `yaml` over dir/in.lcmlog, and what it published.
+struct VoProcessRun {
+  int exit_status = -1;
+  std::string cmd;
+  fusionloc::status_t last_status;
+  int factors = 0;
+};
+VoProcessRun RunStereoVoOnLog(const std::string& bin, const fl::test::TempDir& dir,
+                              const std::string& yaml) {
+  VoProcessRun run;
+  {
+    std::ofstream out(dir.file("vo.yaml"));
+    out << yaml;
+  }
+  run.cmd = bin + " --config " + dir.file("vo.yaml") + " --lcm-url log:" + dir.file("in.lcmlog") +
+            "," + dir.file("out.lcmlog") + " --log-level error > " + dir.file("stdout.txt") +
+            " 2>&1";
+  run.exit_status = std::system(run.cmd.c_str());
+  if (run.exit_status != 0) return run;
+  fl::LcmLogReader reader(dir.file("out.lcmlog"));
+  fl::LcmLogEvent ev;
+  while (reader.Next(&ev)) {
+    const int size = static_cast<int>(ev.data.size());
+    if (ev.channel == "STATUS_FL_STEREO_VO") {
+      if (run.last_status.decode(ev.data.data(), 0, size) != size) run.exit_status = -2;
+    } else if (ev.channel == fl::channels::kVoFactors) {
+      ++run.factors;
+    }
+  }
+  return run;
+}
+
 // use_odometry_prior: ODOMETRY reaches the VO as its motion prior (every tracked frame after
 // the first is predicted by it); a non-finite sample is dropped and counted.
 TEST(StereoVoLcm, ProcessUsesTheOdometryPrior) {
   const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
   if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
   fl::test::TempDir dir;
-  const StereoCalibration calib = fl::test::stereo::TestCalibration();
-  const cv::Mat tex = fl::test::stereo::Texture(900, 700, 5);
-  {
-    fl::LcmLogWriter log(dir.file("in.lcmlog"));
-    const Utime t0 = 2000000000;
-    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0 - 5);
-    log.Write(fl::channels::kCameraToBase, MakeCameraToBase(calib), t0 - 4);
-    cv::Mat l, r;
-    for (int k = 0; k < 10; ++k) {
-      const Utime t = t0 + 100000 * k;
-      fusionloc::wheel_odometry_t o{};
-      o.utime = t;
-      o.y = -0.05 * k;  // the camera's +x is the base's -y
-      if (k == 5) o.theta = std::nan("");
-      log.Write(fl::channels::kOdometry, o, t);
-      fl::test::stereo::PlanePair(tex, calib, 5.0, 0.05 * k, 0.0, &l, &r);
-      log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);
-    }
-    log.Close();
-  }
-  {
-    std::ofstream yaml(dir.file("vo.yaml"));
-    yaml << "use_odometry_prior: true\n";
-  }
-  const std::string cmd = bin + " --config " + dir.file("vo.yaml") + " --lcm-url log:" +
-                          dir.file("in.lcmlog") + "," + dir.file("out.lcmlog") +
-                          " --log-level error > " + dir.file("stdout.txt") + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  fl::LcmLogReader reader(dir.file("out.lcmlog"));
-  fl::LcmLogEvent ev;
-  fusionloc::status_t last_status;
-  while (reader.Next(&ev)) {
-    if (ev.channel == "STATUS_FL_STEREO_VO") {
-      const int size = static_cast<int>(ev.data.size());
-      ASSERT_EQ(last_status.decode(ev.data.data(), 0, size), size);
-    }
-  }
+  WritePlaneLog(dir.file("in.lcmlog"), fl::test::stereo::TestCalibration(), 5, 10,
+                [](fl::LcmLogWriter* log, int k, Utime t) {
+                  fusionloc::wheel_odometry_t o{};
+                  o.utime = t;
+                  o.y = -0.05 * k;  // the camera's +x is the base's -y
+                  if (k == 5) o.theta = std::nan("");
+                  log->Write(fl::channels::kOdometry, o, t);
+                });
+  const VoProcessRun run = RunStereoVoOnLog(bin, dir, "use_odometry_prior: true\n");
+  ASSERT_EQ(run.exit_status, 0) << run.cmd;
   // Frames 1..9 are tracked and predicted, but frame 5: when it arrives the odometry ends at
   // frame 4's time (the odometry is interpolated, never extrapolated).
-  EXPECT_EQ(StatusValue(last_status, "odometry_prior_frames"), 8);
-  EXPECT_EQ(last_status.messages_dropped, 1);  // the NaN sample
+  EXPECT_EQ(StatusValue(run.last_status, "odometry_prior_frames"), 8);
+  EXPECT_EQ(run.last_status.messages_dropped, 1);  // the NaN sample
 }
 
 // local_ba through the process: a keyframe every 10 cm over a textured plane, each adjusted
@@ -268,46 +297,15 @@ TEST(StereoVoLcm, ProcessRunsTheLocalBundleAdjustment) {
   const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
   if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
   fl::test::TempDir dir;
-  const StereoCalibration calib = fl::test::stereo::TestCalibration();
-  const cv::Mat tex = fl::test::stereo::Texture(900, 700, 6);
-  {
-    fl::LcmLogWriter log(dir.file("in.lcmlog"));
-    const Utime t0 = 2000000000;
-    log.Write(fl::channels::kStereoCalibration, MakeCalibration(calib, true), t0 - 5);
-    log.Write(fl::channels::kCameraToBase, MakeCameraToBase(calib), t0 - 4);
-    cv::Mat l, r;
-    for (int k = 0; k < 12; ++k) {
-      const Utime t = t0 + 100000 * k;
-      fl::test::stereo::PlanePair(tex, calib, 5.0, 0.05 * k, 0.0, &l, &r);
-      log.Write(fl::channels::kStereo, MakeStereo(t, l, r), t);
-    }
-    log.Close();
-  }
-  {
-    std::ofstream yaml(dir.file("vo.yaml"));
-    yaml << "keyframe_translation_m: 0.1\nlocal_ba: {enabled: true}\n";
-  }
-  const std::string cmd = bin + " --config " + dir.file("vo.yaml") + " --lcm-url log:" +
-                          dir.file("in.lcmlog") + "," + dir.file("out.lcmlog") +
-                          " --log-level error > " + dir.file("stdout.txt") + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  fl::LcmLogReader reader(dir.file("out.lcmlog"));
-  fl::LcmLogEvent ev;
-  fusionloc::status_t last_status;
-  int factors = 0;
-  while (reader.Next(&ev)) {
-    const int size = static_cast<int>(ev.data.size());
-    if (ev.channel == "STATUS_FL_STEREO_VO") {
-      ASSERT_EQ(last_status.decode(ev.data.data(), 0, size), size);
-    } else if (ev.channel == fl::channels::kVoFactors) {
-      ++factors;
-    }
-  }
-  EXPECT_GE(factors, 4);
-  EXPECT_EQ(StatusValue(last_status, "local_ba_windows"), factors);
-  EXPECT_EQ(StatusValue(last_status, "local_ba_skipped"), 0);
-  EXPECT_GT(StatusValue(last_status, "local_ba_points"), 20);
-  EXPECT_LT(StatusValue(last_status, "local_ba_rms_px"), 1.0);
+  WritePlaneLog(dir.file("in.lcmlog"), fl::test::stereo::TestCalibration(), 6, 12, nullptr);
+  const VoProcessRun run =
+      RunStereoVoOnLog(bin, dir, "keyframe_translation_m: 0.1\nlocal_ba: {enabled: true}\n");
+  ASSERT_EQ(run.exit_status, 0) << run.cmd;
+  EXPECT_GE(run.factors, 4);
+  EXPECT_EQ(StatusValue(run.last_status, "local_ba_windows"), run.factors);
+  EXPECT_EQ(StatusValue(run.last_status, "local_ba_skipped"), 0);
+  EXPECT_GT(StatusValue(run.last_status, "local_ba_points"), 20);
+  EXPECT_LT(StatusValue(run.last_status, "local_ba_rms_px"), 1.0);
 }
 
 // LASER_3D converted to the left camera frame through both mountings: a point on the optical
