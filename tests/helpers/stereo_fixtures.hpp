@@ -10,6 +10,7 @@
 #include <random>
 #include <vector>
 
+#include "fusionloc/common/geometry.hpp"
 #include "fusionloc/stereo_vo/local_ba.hpp"
 #include "fusionloc/stereo_vo/motion.hpp"
 #include "fusionloc/stereo_vo/stereo_vo.hpp"
@@ -162,6 +163,14 @@ inline fl::vo::PointMeasurements MakeLaserMeasurements(
     m.has_a = m.has_b = true;
   }
   return out;
+}
+
+// Translation [m] and rotation [deg] between two poses.
+inline double TransError(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return (a.translation() - b.translation()).norm();
+}
+inline double RotErrorDeg(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return fl::RotationAngle(a.linear().transpose() * b.linear()) * 180.0 / M_PI;
 }
 
 inline Eigen::Isometry3d MakeMotion(double rx, double ry, double rz, double tx, double ty,

@@ -21,12 +21,8 @@ using fl::test::stereo::MakeMotion;
 
 StereoCamera Cam() { return {500.0, 500.0, 319.5, 239.5, 0.5}; }
 
-double TransError(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-  return (a.translation() - b.translation()).norm();
-}
-double RotErrorDeg(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-  return fl::RotationAngle((a.inverse() * b).linear()) * 180.0 / M_PI;
-}
+using fl::test::stereo::RotErrorDeg;
+using fl::test::stereo::TransError;
 
 // The window's poses but the first moved by a random error of about trans_m and rot_deg.
 void Perturb(std::vector<BaKeyframe>* window, double trans_m, double rot_deg, uint32_t seed) {

@@ -23,12 +23,8 @@ const std::vector<const ceres::Manifold*>* const kNoManifolds = nullptr;
 
 StereoCamera Cam() { return {500.0, 500.0, 319.5, 239.5, 0.2}; }
 
-double TransError(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-  return (a.translation() - b.translation()).norm();
-}
-double RotErrorDeg(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-  return fl::RotationAngle(a.linear().transpose() * b.linear()) * 180.0 / M_PI;
-}
+using fl::test::stereo::RotErrorDeg;
+using fl::test::stereo::TransError;
 
 TEST(StereoVoMotion, SvdIsExactOnNoiseFreePoints) {
   const Eigen::Isometry3d T = MakeMotion(0.1, -0.3, 0.2, 1.5, -0.4, 2.0);

@@ -65,24 +65,31 @@ void Laser3dModel::Scan(const World& world, const Pose2& T_world_base, Rng* rng,
   const Pose2 T_world_laser = T_world_base * Pose2(options_.x_m, options_.y_m, 0.0);
   const Eigen::Vector2d origin = T_world_laser.translation();
   const int azimuths = std::max(1, static_cast<int>(std::lround(360.0 / options_.azimuth_step_deg)));
+  std::vector<double> slope(static_cast<size_t>(options_.lines));
+  std::vector<double> cos_e(slope.size()), sin_e(slope.size());
+  for (int line = 0; line < options_.lines; ++line) {
+    const double e = LineElevation(line);
+    slope[static_cast<size_t>(line)] = std::tan(e);
+    cos_e[static_cast<size_t>(line)] = std::cos(e);
+    sin_e[static_cast<size_t>(line)] = std::sin(e);
+  }
   std::vector<RayHit> hits;
   for (int a = 0; a < azimuths; ++a) {
     const double azimuth = a * options_.azimuth_step_deg * kDegToRad;  // in the laser frame
     const double heading = T_world_laser.theta + azimuth;
     const Eigen::Vector2d dir(std::cos(heading), std::sin(heading));  // unit: t is horizontal
     world.CastAll(origin, dir, 1e-9, &hits);
-    for (int line = 0; line < options_.lines; ++line) {
-      const double e = LineElevation(line);
-      const Surface surface = FirstSurface(world, options_.z_m, std::tan(e), hits);
+    for (size_t line = 0; line < slope.size(); ++line) {
+      const Surface surface = FirstSurface(world, options_.z_m, slope[line], hits);
       if (surface.kind == Surface::kSky) continue;
-      const double range = surface.t / std::cos(e);  // along the beam
+      const double range = surface.t / cos_e[line];  // along the beam
       if (range < options_.min_range_m || range > options_.max_range_m) continue;
       // Noise draws only for returns: the scan is deterministic given the seed.
       const double r = std::max(options_.min_range_m,
                                 range + (rng != nullptr ? rng->Normal(options_.range_sigma_m) : 0.0));
-      points->emplace_back(static_cast<float>(r * std::cos(e) * std::cos(azimuth)),
-                           static_cast<float>(r * std::cos(e) * std::sin(azimuth)),
-                           static_cast<float>(r * std::sin(e)));
+      points->emplace_back(static_cast<float>(r * cos_e[line] * std::cos(azimuth)),
+                           static_cast<float>(r * cos_e[line] * std::sin(azimuth)),
+                           static_cast<float>(r * sin_e[line]));
     }
   }
 }

@@ -151,20 +151,19 @@ Status SimOptions::SetMounting(const RobotDescription& robot) {
                          "': camera.rpy_deg must be [-90, 0, -90] for the simulator (it renders "
                          "a level camera looking along base x)");
   }
-  laser.x_m = robot.laser.xyz_m.at(0);
-  laser.y_m = robot.laser.xyz_m.at(1);
-  laser.z_m = robot.laser.xyz_m.at(2);
-  camera.x_m = robot.camera.xyz_m.at(0);
-  camera.y_m = robot.camera.xyz_m.at(1);
-  camera.z_m = robot.camera.xyz_m.at(2);
   if (robot.laser3d.rpy_deg != level) {
     return Status::Error("robot '" + robot.name +
                          "': laser3d.rpy_deg must be [0, 0, 0] for the simulator (it models a "
                          "level multi-line laser)");
   }
-  laser3d.x_m = robot.laser3d.xyz_m.at(0);
-  laser3d.y_m = robot.laser3d.xyz_m.at(1);
-  laser3d.z_m = robot.laser3d.xyz_m.at(2);
+  const auto position = [](const Mount& m, double* x, double* y, double* z) {
+    *x = m.xyz_m.at(0);
+    *y = m.xyz_m.at(1);
+    *z = m.xyz_m.at(2);
+  };
+  position(robot.laser, &laser.x_m, &laser.y_m, &laser.z_m);
+  position(robot.camera, &camera.x_m, &camera.y_m, &camera.z_m);
+  position(robot.laser3d, &laser3d.x_m, &laser3d.y_m, &laser3d.z_m);
   return Validate();
 }
 

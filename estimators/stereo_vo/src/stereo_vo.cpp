@@ -394,8 +394,10 @@ void StereoVo::StartKeyframe(const stages::StereoFrame& frame, StereoVoResult* r
     kf.id = keyframe_id_;
     kf.utime = frame.utime;
     kf.T_world_camera = T_world_camera_;
-    kf.observations =
-        stages::KeyframeObservations(camera_, frame, offset_px_, options_.laser_depth);
+    // The laser depth points only if the window uses them (an association per observation).
+    kf.observations = stages::KeyframeObservations(
+        camera_, frame, offset_px_,
+        options_.local_ba.laser_points ? &options_.laser_depth : nullptr);
     ba_window_.push_back(std::move(kf));
     const size_t window = static_cast<size_t>(options_.local_ba.window_keyframes);
     if (ba_window_.size() > window) {

@@ -397,7 +397,7 @@ void KeyframePoints(const StereoCamera& camera, const StereoFrame& frame, double
 
 std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
                                                 const StereoFrame& frame, double offset_px,
-                                                const LaserDepthOptions& laser_options) {
+                                                const LaserDepthOptions* laser_options) {
   std::vector<BaObservation> out;
   out.reserve(At(frame.stereo_matches));
   for (int i = 0; i < frame.fl.size(); ++i) {
@@ -407,9 +407,9 @@ std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
     o.track_id = frame.track_id[At(i)];
     o.uvu = {pl.x, pl.y, CorrectRightX(camera, frame.right_x[At(i)], offset_px)};
     const double disparity = o.uvu(0) - o.uvu(2);
-    if (frame.laser && disparity > 0) {
+    if (laser_options != nullptr && frame.laser && disparity > 0) {
       const double z = camera.Triangulate(o.uvu(0), o.uvu(1), disparity).z();
-      o.has_point = LaserPoint(camera, *frame.laser, o.uvu, z, laser_options, &o.m_camera,
+      o.has_point = LaserPoint(camera, *frame.laser, o.uvu, z, *laser_options, &o.m_camera,
                                &o.W_camera) == LaserDepthVerdict::kOk;
     }
     out.push_back(o);

@@ -374,7 +374,9 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
       }
       if (r.is_keyframe) {
         ++keyframes_;
-        if (options_.local_ba.enabled && r.factor) ++(r.stats.local_ba ? ba_windows_ : ba_skipped_);
+        if (options_.local_ba.enabled && r.factor) {
+          ++(r.stats.local_ba ? ba_windows_ : ba_skipped_);
+        }
         lcm_->Publish(ch_points_, KeyframePointsToLcm(r), stamp);
         status_.CountOut();
       }

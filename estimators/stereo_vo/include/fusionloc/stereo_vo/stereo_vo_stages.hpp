@@ -209,9 +209,9 @@ void KeyframePoints(const StereoCamera& camera, const StereoFrame& frame, double
                     std::vector<Eigen::Vector3f>* points, std::vector<float>* intensities);
 // The local bundle adjustment's observations of a keyframe: every stereo feature with a track
 // id, (u_left, v, u_right corrected by the disparity offset offset_px), with its validated laser
-// depth point (LaserPoint) when the frame has a usable scan.
+// depth point (LaserPoint) when laser_options is given and the frame has a usable scan.
 std::vector<BaObservation> KeyframeObservations(const StereoCamera& camera,
                                                 const StereoFrame& frame, double offset_px,
-                                                const LaserDepthOptions& laser_options);
+                                                const LaserDepthOptions* laser_options);
 
 }  // namespace fl::vo::stages
