@@ -358,6 +358,9 @@ void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& win
                   double sigma_px, const std::vector<std::vector<bool>>& keep, BaState* state,
                   ceres::Problem* problem) {
   double* d0 = state->delta.empty() ? nullptr : state->delta[0].data();
+  // One robust loss for every image and laser residual (the problem deletes it once).
+  ceres::LossFunction* loss = new ceres::HuberLoss(options.huber_px);
+  bool loss_used = false;
   for (size_t t = 0; t < tracks.size(); ++t) {
     const auto& observations = tracks[t].observations;
     int kept = 0;
@@ -367,7 +370,7 @@ void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& win
     for (size_t m = 0; m < observations.size(); ++m) {
       if (!keep.empty() && !keep[t][m]) continue;
       const auto& [k, obs] = observations[m];
-      ceres::LossFunction* loss = new ceres::HuberLoss(options.huber_px);
+      loss_used = true;
       double* delta = state->delta[k].data();
       if (k == 0) {
         problem->AddResidualBlock(StereoPointCostA::Create(camera, obs.uvu), loss, point);
@@ -377,8 +380,8 @@ void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& win
       }
       if (options.laser_points && obs.has_point) {
         problem->AddResidualBlock(
-            LaserPointCost::Create(state->T0_o_k[k], obs.m_camera, sigma_px * obs.W_camera),
-            new ceres::HuberLoss(options.huber_px), delta, delta + 3, point);
+            LaserPointCost::Create(state->T0_o_k[k], obs.m_camera, sigma_px * obs.W_camera), loss,
+            delta, delta + 3, point);
         if (k == 0) {  // keyframe 0 is the gauge
           problem->SetParameterBlockConstant(d0);
           problem->SetParameterBlockConstant(d0 + 3);
@@ -386,6 +389,7 @@ void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& win
       }
     }
   }
+  if (!loss_used) delete loss;
   if (!options.motion_prior) return;
   for (size_t k = 1; k < window.size() && k < state->delta.size(); ++k) {
     const BaKeyframe& kf = window[k];

@@ -481,12 +481,13 @@ void StereoVo::AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int trac
     kf.has_motion = ba_window_.size() >= 2;
     kf.T_prev_camera = T_chain;
     kf.motion_covariance = cov_chain;
-    AdjustWindow(&f, result);
+    AdjustWindow(cov_chain, &f, result);
   }
   if (f.information.allFinite()) result->factor = f;
 }
 
-bool StereoVo::AdjustWindow(KeyframeFactor* factor, StereoVoResult* result) {
+void StereoVo::AdjustWindow(const Eigen::Matrix<double, 6, 6>& cov_chain, KeyframeFactor* factor,
+                            StereoVoResult* result) {
   const double t0 = NowMs();
   const LocalBaResult ba =
       LocalBundleAdjustment(camera_, ba_window_, options_.local_ba, pixel_sigma_px_);
@@ -498,27 +499,24 @@ bool StereoVo::AdjustWindow(KeyframeFactor* factor, StereoVoResult* result) {
   stats.ba_rms_px = ba.final_rms_px;
   if (!ba.ok) {
     result->message = "local BA not applied: " + ba.message;
-    return false;
+    return;
   }
   stats.local_ba = true;
   const size_t n = ba_window_.size();
   for (size_t k = 0; k < n; ++k) ba_window_[k].T_world_camera = ba.T_world_camera[k];
   T_world_camera_ = ba.T_world_camera[n - 1];
   const Eigen::Isometry3d T_i_j = ba.T_world_camera[n - 2].inverse() * ba.T_world_camera[n - 1];
-  // Without the window's covariance (rank deficient), the chained one (the factor's, back in
-  // the camera frame).
-  const Eigen::Isometry3d& T_base_camera = calibration_.T_base_camera;
+  // Without the window's covariance (rank deficient), the chained one.
   const Eigen::Matrix<double, 6, 6> cov =
       ba.covariance_ok
           ? Eigen::Matrix<double, 6, 6>(options_.refine.covariance_scale * ba.covariance_last)
-          : ChangeFrameCovariance(factor->covariance, T_base_camera.inverse());
-  KeyframeFactor f = stages::MakeKeyframeFactor(T_base_camera, T_i_j, cov);
+          : cov_chain;
+  KeyframeFactor f = stages::MakeKeyframeFactor(calibration_.T_base_camera, T_i_j, cov);
   f.utime_i = factor->utime_i;
   f.utime_j = factor->utime_j;
   f.keyframe_id_i = factor->keyframe_id_i;
   f.keyframe_id_j = factor->keyframe_id_j;
   *factor = f;
-  return true;
 }
 
 }  // namespace fl::vo

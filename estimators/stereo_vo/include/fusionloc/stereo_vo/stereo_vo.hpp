@@ -266,9 +266,11 @@ class StereoVo {
   void AddKeyframeFactorIfDue(const stages::StereoFrame& frame, int tracked_from_keyframe,
                               StereoVoResult* result);
   // Local BA over ba_window_ (the new keyframe is its last): moves the window's poses and the
-  // chain, and makes *factor the adjusted relative pose of the last two; false (factor and
-  // chain unchanged, result->message says why) if the window could not be adjusted.
-  bool AdjustWindow(KeyframeFactor* factor, StereoVoResult* result);
+  // chain, and makes *factor the adjusted relative pose of the last two (covariance from the
+  // window, or cov_chain, the chained camera-frame one, if the window's is rank deficient). If
+  // the window cannot be adjusted, factor and chain stay and result->message says why.
+  void AdjustWindow(const Eigen::Matrix<double, 6, 6>& cov_chain, KeyframeFactor* factor,
+                    StereoVoResult* result);
   // The camera's motion T_a_b from time a to b by the wheel odometry (use_odometry_prior and
   // samples around both times); false otherwise.
   bool OdometryMotion(Utime a, Utime b, Eigen::Isometry3d* T_a_b_camera) const;
