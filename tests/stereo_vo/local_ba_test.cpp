@@ -262,6 +262,62 @@ TEST(StereoVoLocalBa, TheRelativeCovarianceMatchesTheScatterOverNoiseDraws) {
   EXPECT_LT(chi2_mean, 6.0 * 1.6);
 }
 
+TEST(StereoVoLocalBa, TheAnalyticSolverAgreesWithTheCeresReference) {
+  // Every residual kind at once: reprojections with wrong tracks (outliers), the motion prior
+  // (a chain 1 cm / 0.3 deg off the truth) and laser depth points; both solvers run to
+  // convergence from the same perturbed window and must meet at the same minimum, with the
+  // same observations dropped.
+  const StereoCamera cam = Cam();
+  for (uint32_t seed : {41u, 42u, 43u}) {
+    std::vector<Eigen::Isometry3d> truth;
+    std::vector<BaKeyframe> window =
+        MakeKeyframeWindow(cam, 6, 150, 1.0, 0.04, 0.5, seed, &truth);
+    std::mt19937 rng(seed + 1);
+    std::normal_distribution<double> n(0.0, 1.0);
+    for (size_t k = 0; k < window.size(); ++k) {
+      for (size_t i = 0; i < window[k].observations.size(); ++i) {
+        BaObservation& o = window[k].observations[i];
+        if (k == window.size() - 1 && i % 15 == 0) o.uvu += Eigen::Vector3d(12, -8, 12);
+        if (i % 4 == 0) {
+          const Eigen::Vector3d ray((o.uvu(0) - cam.cx) / cam.fx, (o.uvu(1) - cam.cy) / cam.fy,
+                                    1.0);
+          const double z = cam.Triangulate(o.uvu(0), o.uvu(1), o.uvu(0) - o.uvu(2)).z();
+          o.has_point = true;
+          o.m_camera = (z + 0.03 * n(rng)) * ray;
+          o.W_camera = PointSqrtInformation(ray, 0.03, 2.5 * z / cam.fx);
+        }
+      }
+      if (k == 0) continue;
+      window[k].has_motion = true;
+      window[k].T_prev_camera = truth[k - 1].inverse() * truth[k] *
+                                MakeMotion(0.005 * n(rng), 0.005 * n(rng), 0.005 * n(rng),
+                                           0.01 * n(rng), 0.01 * n(rng), 0.01 * n(rng));
+      window[k].motion_covariance.diagonal() << 1e-4, 1e-4, 1e-4, 3e-5, 3e-5, 3e-5;
+    }
+    Perturb(&window, 0.05, 0.5, seed + 2);
+    LocalBaOptions options;
+    options.laser_points = true;
+    options.max_iterations = 30;
+    const LocalBaResult analytic = LocalBundleAdjustment(cam, window, options, 0.5);
+    options.use_ceres = true;
+    const LocalBaResult reference = LocalBundleAdjustment(cam, window, options, 0.5);
+    ASSERT_TRUE(analytic.ok && reference.ok) << analytic.message << reference.message;
+    ASSERT_TRUE(analytic.covariance_ok && reference.covariance_ok);
+    EXPECT_GT(analytic.outliers, 5);
+    EXPECT_GT(analytic.laser_points, 100);
+    EXPECT_EQ(analytic.outliers, reference.outliers) << "seed " << seed;
+    EXPECT_EQ(analytic.laser_points, reference.laser_points);
+    EXPECT_NEAR(analytic.final_rms_px, reference.final_rms_px, 1e-6);
+    for (size_t k = 1; k < window.size(); ++k) {
+      EXPECT_LT(TransError(analytic.T_world_camera[k], reference.T_world_camera[k]), 1e-6)
+          << "seed " << seed << ", keyframe " << k;
+      EXPECT_LT(RotErrorDeg(analytic.T_world_camera[k], reference.T_world_camera[k]), 1e-5);
+    }
+    EXPECT_LT((analytic.covariance_last - reference.covariance_last).norm(),
+              1e-4 * reference.covariance_last.norm());
+  }
+}
+
 TEST(StereoVoLocalBa, RefusesWindowsItCannotAdjust) {
   const StereoCamera cam = Cam();
   std::vector<Eigen::Isometry3d> truth;

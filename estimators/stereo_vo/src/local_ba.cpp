@@ -5,9 +5,11 @@
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <unordered_map>
 #include <utility>
 
+#include "ba_kernels.hpp"
 #include "fusionloc/common/se3_between_cost.hpp"
 #include "fusionloc/common/sqrt_information.hpp"
 #include "fusionloc/stereo_vo/reprojection_cost.hpp"
@@ -16,6 +18,7 @@ namespace fl::vo {
 namespace {
 
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using PointXyz = std::array<double, 3>;
 
 // Reprojection error (max over u_left, v, u_right) of p_o seen by keyframe pose T_o_k; +inf
 // behind the camera.
@@ -173,103 +176,323 @@ bool Solve(const LocalBaOptions& options, ceres::Problem* problem, int* iteratio
   return summary.IsSolutionUsable();
 }
 
-// Covariance of the free keyframe poses (unit pixel noise) with the points marginalised: the
-// Gauss-Newton Hessian J^T J of the robustified residuals (Problem::Evaluate applies the loss),
-// reduced to the poses by the Schur complement S = H_cc - sum_p H_cp H_pp^-1 H_pc, inverted.
-// *free gets the keyframe index of each 6-block of *cov.
-bool PoseCovariance(const BaState& state, ceres::Problem* problem, Eigen::MatrixXd* cov,
-                    std::vector<size_t>* free) {
-  ceres::Problem::EvaluateOptions eval;
-  free->clear();
-  for (size_t k = 1; k < state.delta.size(); ++k) {
-    double* d = const_cast<double*>(state.delta[k].data());
-    if (problem->HasParameterBlock(d)) {
-      eval.parameter_blocks.push_back(d);      // rho
-      eval.parameter_blocks.push_back(d + 3);  // phi
-      free->push_back(k);
-    }
-  }
-  const int poses = static_cast<int>(free->size());
-  if (poses == 0) return false;
-  const int pose_cols = 6 * poses;
-  std::vector<double*> points;
-  for (const auto& p : state.point) {
-    double* x = const_cast<double*>(p.data());
-    if (problem->HasParameterBlock(x)) points.push_back(x);
-  }
-  eval.parameter_blocks.insert(eval.parameter_blocks.end(), points.begin(), points.end());
-  eval.apply_loss_function = true;
-  eval.num_threads = 1;
-  ceres::CRSMatrix J;
-  if (!problem->Evaluate(eval, nullptr, nullptr, nullptr, &J)) return false;
-  Eigen::MatrixXd H_cc = Eigen::MatrixXd::Zero(pose_cols, pose_cols);
-  std::vector<Eigen::Matrix3d> H_pp(points.size(), Eigen::Matrix3d::Zero());
-  std::vector<Eigen::MatrixXd> H_pc(points.size(), Eigen::MatrixXd::Zero(3, pose_cols));
-  for (int r = 0; r < J.num_rows; ++r) {
-    // A reprojection row touches at most one pose (6 columns) and one point; a motion prior row
-    // two poses and no point.
-    Eigen::Matrix<double, 6, 1> pose_row = Eigen::Matrix<double, 6, 1>::Zero();
-    Eigen::Vector3d point_row = Eigen::Vector3d::Zero();
-    int pose = -1, point = -1;
-    bool two_poses = false;
-    for (int e = J.rows[r]; e < J.rows[r + 1]; ++e) {
-      const int c = J.cols[e];
-      if (c < pose_cols) {
-        two_poses = two_poses || (pose >= 0 && pose != c / 6);
-        pose = c / 6;
-        pose_row(c % 6) = J.values[e];
-      } else {
-        point = (c - pose_cols) / 3;
-        point_row((c - pose_cols) % 3) = J.values[e];
-      }
-    }
-    if (two_poses) {
-      Eigen::VectorXd row = Eigen::VectorXd::Zero(pose_cols);
-      for (int e = J.rows[r]; e < J.rows[r + 1]; ++e) row(J.cols[e]) = J.values[e];
-      H_cc.noalias() += row * row.transpose();
-      continue;
-    }
-    if (pose >= 0)
-      H_cc.block<6, 6>(6 * pose, 6 * pose).noalias() += pose_row * pose_row.transpose();
-    if (point >= 0) {
-      H_pp[point].noalias() += point_row * point_row.transpose();
-      if (pose >= 0) {
-        H_pc[point].block<3, 6>(0, 6 * pose).noalias() += point_row * pose_row.transpose();
-      }
-    }
-  }
-  Eigen::MatrixXd S = H_cc;
-  for (size_t p = 0; p < points.size(); ++p) {
-    const Eigen::LDLT<Eigen::Matrix3d> ldlt(H_pp[p]);
-    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
-    S.noalias() -= H_pc[p].transpose() * ldlt.solve(H_pc[p]);
-  }
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
-  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
-  *cov = ldlt.solve(Eigen::MatrixXd::Identity(pose_cols, pose_cols));
-  return cov->allFinite();
+// The motion prior of keyframe k (k >= 1) on its motion from keyframe k-1 as a square-root
+// information of the between error (Se3BetweenCost); false if its covariance is unusable (then
+// the reprojections alone hold the pair).
+bool MotionPriorSqrtInformation(const BaKeyframe& kf, const LocalBaOptions& options,
+                                Matrix6d* sqrt_information) {
+  if (!kf.has_motion) return false;
+  const Matrix6d cov_e = Se3BetweenErrorCovariance(
+      kf.T_prev_camera.linear(), options.motion_prior_covariance_scale * kf.motion_covariance);
+  const Matrix6d information = cov_e.ldlt().solve(Matrix6d::Identity());
+  return SqrtInformation<6>(0.5 * (information + information.transpose()), sqrt_information);
 }
 
-// Covariance of the newest relative pose (see the header), unit pixel noise.
-bool LastRelativeCovariance(const BaState& state, ceres::Problem* problem, Matrix6d* cov) {
-  Eigen::MatrixXd poses;
-  std::vector<size_t> free;
-  if (!PoseCovariance(state, problem, &poses, &free)) return false;
+// The analytic solver (see the header): the window's residual terms, linearised at the current
+// poses T_o_k (keyframe 0 fixed at the identity) and points p_o.
+class WindowBa {
+ public:
+  using Mat36 = Eigen::Matrix<double, 3, 6>;
+
+  WindowBa(const StereoCamera& camera, const std::vector<BaKeyframe>& window,
+           const std::vector<BaTrack>& tracks, const LocalBaOptions& options, double sigma_px,
+           const std::vector<std::vector<bool>>& keep)
+      : camera_(camera), huber_{options.huber_px}, n_(window.size()) {
+    for (size_t t = 0; t < tracks.size(); ++t) {
+      const auto& observations = tracks[t].observations;
+      int kept = 0;
+      for (size_t m = 0; m < observations.size(); ++m) kept += keep.empty() || keep[t][m];
+      if (kept < options.min_track_keyframes) continue;
+      Point point;
+      point.track = t;
+      for (size_t m = 0; m < observations.size(); ++m) {
+        if (!keep.empty() && !keep[t][m]) continue;
+        const auto& [k, obs] = observations[m];
+        Term term;
+        term.k = k;
+        term.z = obs.uvu;
+        point.terms.push_back(term);
+        if (options.laser_points && obs.has_point) {
+          term.laser = true;
+          term.z = obs.m_camera;
+          term.sW = sigma_px * obs.W_camera;
+          point.terms.push_back(term);
+        }
+      }
+      points_.push_back(std::move(point));
+    }
+    if (options.motion_prior) {
+      for (size_t k = 1; k < window.size(); ++k) {
+        Prior prior;
+        prior.k = k;
+        prior.T_prev = window[k].T_prev_camera;
+        if (MotionPriorSqrtInformation(window[k], options, &prior.sqrt_information)) {
+          priors_.push_back(prior);
+        }
+      }
+    }
+    Hinv_.resize(points_.size());
+    gp_.resize(points_.size());
+    blocks_.resize(points_.size());
+  }
+
+  bool empty() const { return points_.empty() && priors_.empty(); }
+  size_t pose_dims() const { return 6 * (n_ - 1); }
+
+  // Robust cost 1/2 sum rho(|r|^2) + 1/2 sum |r_prior|^2; +inf if a point is behind a camera.
+  double Cost(const std::vector<Eigen::Isometry3d>& T, const std::vector<PointXyz>& p) const {
+    double cost = 0;
+    Eigen::Vector3d r;
+    for (const Point& point : points_) {
+      const Eigen::Vector3d p_o(p[point.track][0], p[point.track][1], p[point.track][2]);
+      for (const Term& term : point.terms) {
+        if (!TermResidual(term, T[term.k], p_o, &r)) return kInf;
+        cost += huber_.Rho(r.squaredNorm());
+      }
+    }
+    for (const Prior& prior : priors_) {
+      Vector6 r6;
+      if (!PriorResidual(prior, T, &r6, nullptr)) return kInf;
+      cost += r6.squaredNorm();
+    }
+    return 0.5 * cost;
+  }
+
+  // The reduced system S dy = -g over the free poses (keyframes 1..n-1, 6 each) at (T, p):
+  // S = H_cc - sum_p H_cp H_pp^-1 H_pc. robust: Huber weights (else plain Gauss-Newton); lambda:
+  // LM damping of the points' blocks and of S's diagonal. A pose no term touches gets an
+  // identity block (its step stays zero) and *constrained false. false if a point's block is
+  // singular or a point is behind a camera.
+  bool Linearise(const std::vector<Eigen::Isometry3d>& T, const std::vector<PointXyz>& p,
+                 bool robust, double lambda, Eigen::MatrixXd* S, Eigen::VectorXd* g,
+                 std::vector<bool>* constrained) {
+    const int dims = static_cast<int>(pose_dims());
+    S->setZero(dims, dims);
+    g->setZero(dims);
+    constrained->assign(n_, false);
+    (*constrained)[0] = true;  // the gauge
+    for (size_t i = 0; i < points_.size(); ++i) {
+      const Point& point = points_[i];
+      const Eigen::Vector3d p_o(p[point.track][0], p[point.track][1], p[point.track][2]);
+      Eigen::Matrix3d Hpp = Eigen::Matrix3d::Zero();
+      Eigen::Vector3d gp = Eigen::Vector3d::Zero();
+      auto& blocks = blocks_[i];
+      blocks.clear();
+      for (const Term& term : point.terms) {
+        const Eigen::Isometry3d& T_o_k = T[term.k];
+        const Eigen::Matrix3d Rt = T_o_k.linear().transpose();
+        const Eigen::Vector3d q = term.k == 0 ? p_o : Eigen::Vector3d(Rt * (p_o - T_o_k.translation()));
+        Eigen::Vector3d r;
+        Eigen::Matrix3d Jq;  // d r / d q
+        if (term.laser) {
+          r = term.sW * (q - term.z);
+          Jq = term.sW;
+        } else {
+          if (!ba::StereoResidual(camera_, q, term.z, &r)) return false;
+          Jq = ba::StereoProjectionJacobian(camera_, q);
+        }
+        const double w = robust ? huber_.Weight(r.squaredNorm()) : 1.0;
+        const Eigen::Matrix3d Jp = term.k == 0 ? Jq : Eigen::Matrix3d(Jq * Rt);
+        Hpp.noalias() += w * Jp.transpose() * Jp;
+        gp.noalias() += w * Jp.transpose() * r;
+        if (term.k == 0) continue;
+        Mat36 Jc;
+        Jc.leftCols<3>() = -Jq;
+        Jc.rightCols<3>() = Jq * ba::Skew(q);
+        const int a = 6 * (term.k - 1);
+        S->block<6, 6>(a, a).noalias() += w * Jc.transpose() * Jc;
+        g->segment<6>(a).noalias() += w * Jc.transpose() * r;
+        const Mat36 Hpc = w * Jp.transpose() * Jc;
+        if (!blocks.empty() && blocks.back().first == term.k) {
+          blocks.back().second += Hpc;  // the laser term of the same observation
+        } else {
+          blocks.emplace_back(term.k, Hpc);
+        }
+        (*constrained)[term.k] = true;
+      }
+      if (lambda > 0) Hpp.diagonal() *= (1.0 + lambda);
+      const Eigen::LDLT<Eigen::Matrix3d> ldlt(Hpp);
+      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
+      Hinv_[i] = ldlt.solve(Eigen::Matrix3d::Identity());
+      gp_[i] = gp;
+      const Eigen::Vector3d Hinv_gp = Hinv_[i] * gp;
+      for (size_t x = 0; x < blocks.size(); ++x) {
+        const auto& [ka, Ba] = blocks[x];
+        const int a = 6 * (ka - 1);
+        const Eigen::Matrix<double, 6, 3> BaT_Hinv = Ba.transpose() * Hinv_[i];
+        g->segment<6>(a).noalias() -= Ba.transpose() * Hinv_gp;
+        // S is symmetric: the blocks on and above the diagonal, mirrored.
+        for (size_t y = x; y < blocks.size(); ++y) {
+          const auto& [kb, Bb] = blocks[y];
+          const int b = 6 * (kb - 1);
+          const Matrix6d X = BaT_Hinv * Bb;
+          S->block<6, 6>(a, b) -= X;
+          if (b != a) S->block<6, 6>(b, a) -= X.transpose();
+        }
+      }
+    }
+    for (const Prior& prior : priors_) {
+      Vector6 r6;
+      Matrix6d J[2];  // d r / d delta_{k-1}, d r / d delta_k
+      if (!PriorResidual(prior, T, &r6, J)) return false;
+      const int kk[2] = {static_cast<int>(prior.k) - 1, static_cast<int>(prior.k)};
+      for (int x = 0; x < 2; ++x) {
+        if (kk[x] == 0) continue;
+        (*constrained)[kk[x]] = true;
+        g->segment<6>(6 * (kk[x] - 1)).noalias() += J[x].transpose() * r6;
+        for (int y = 0; y < 2; ++y) {
+          if (kk[y] == 0) continue;
+          S->block<6, 6>(6 * (kk[x] - 1), 6 * (kk[y] - 1)).noalias() += J[x].transpose() * J[y];
+        }
+      }
+    }
+    for (size_t k = 1; k < n_; ++k) {
+      if ((*constrained)[k]) continue;
+      S->block<6, 6>(6 * (k - 1), 6 * (k - 1)).setIdentity();
+    }
+    if (lambda > 0) S->diagonal() *= (1.0 + lambda);
+    return true;
+  }
+
+  // The points' steps for the pose step dy (after Linearise): dp = -H_pp^-1 (g_p + H_pc dy).
+  void StepPoints(const Eigen::VectorXd& dy, std::vector<PointXyz>* p) const {
+    for (size_t i = 0; i < points_.size(); ++i) {
+      Eigen::Vector3d rhs = gp_[i];
+      for (const auto& [k, B] : blocks_[i]) rhs.noalias() += B * dy.segment<6>(6 * (k - 1));
+      const Eigen::Vector3d dp = -Hinv_[i] * rhs;
+      for (int c = 0; c < 3; ++c) (*p)[points_[i].track][c] += dp(c);
+    }
+  }
+
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
+
+ private:
+  using Vector6 = Eigen::Matrix<double, 6, 1>;
+  // One residual of a point: its reprojection into keyframe k (z = the observation), or with
+  // laser, its laser depth point error (z = the measured point m, sW = s W).
+  struct Term {
+    int k = 0;
+    bool laser = false;
+    Eigen::Vector3d z = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d sW = Eigen::Matrix3d::Zero();
+  };
+  struct Point {
+    size_t track = 0;  // index into the tracks (and the state's points)
+    std::vector<Term> terms;
+  };
+  struct Prior {
+    size_t k = 0;  // on the motion from keyframe k-1 to k
+    Eigen::Isometry3d T_prev = Eigen::Isometry3d::Identity();
+    Matrix6d sqrt_information = Matrix6d::Identity();
+  };
+
+  bool TermResidual(const Term& term, const Eigen::Isometry3d& T_o_k, const Eigen::Vector3d& p_o,
+                    Eigen::Vector3d* r) const {
+    const Eigen::Vector3d q =
+        term.k == 0 ? p_o : Eigen::Vector3d(T_o_k.linear().transpose() * (p_o - T_o_k.translation()));
+    if (term.laser) {
+      *r = term.sW * (q - term.z);
+      return true;
+    }
+    return ba::StereoResidual(camera_, q, term.z, r);
+  }
+
+  // The prior's residual at (T_o_{k-1}, T_o_k) and (J not null) its Jacobians with respect to
+  // the two poses' perturbations at zero, by autodiff of KeyframeMotionCost.
+  bool PriorResidual(const Prior& prior, const std::vector<Eigen::Isometry3d>& T, Vector6* r,
+                     Matrix6d J[2]) const {
+    const std::unique_ptr<ceres::CostFunction> cost(KeyframeMotionCost::Create(
+        T[prior.k - 1], T[prior.k], prior.T_prev, prior.sqrt_information));
+    const double zero[3] = {0, 0, 0};
+    const double* parameters[4] = {zero, zero, zero, zero};
+    if (J == nullptr) return cost->Evaluate(parameters, r->data(), nullptr);
+    Eigen::Matrix<double, 6, 3, Eigen::RowMajor> blocks[4];
+    double* jacobians[4] = {blocks[0].data(), blocks[1].data(), blocks[2].data(),
+                            blocks[3].data()};
+    if (!cost->Evaluate(parameters, r->data(), jacobians)) return false;
+    for (int x = 0; x < 2; ++x) {
+      J[x].leftCols<3>() = blocks[2 * x];
+      J[x].rightCols<3>() = blocks[2 * x + 1];
+    }
+    return true;
+  }
+
+  StereoCamera camera_;
+  ba::Huber huber_;
+  size_t n_ = 0;
+  std::vector<Point> points_;
+  std::vector<Prior> priors_;
+  // Per point, from the last Linearise: H_pp^-1, g_p and its pose blocks H_pc (keyframe, 3x6).
+  std::vector<Eigen::Matrix3d> Hinv_;
+  std::vector<Eigen::Vector3d> gp_;
+  std::vector<std::vector<std::pair<int, Mat36>>> blocks_;
+};
+
+// Levenberg-Marquardt as the two-view refinement's (RefineAnalytic in motion.cpp): at most
+// max_iterations accepted steps; the state's poses and points move, its deltas stay zero.
+bool SolveAnalytic(const LocalBaOptions& options, WindowBa* ba, BaState* state, int* iterations) {
+  std::vector<Eigen::Isometry3d>& T = state->T0_o_k;
+  double cost = ba->Cost(T, state->point);
+  if (!std::isfinite(cost)) return false;
+  double lambda = 1e-4;
+  Eigen::MatrixXd S;
+  Eigen::VectorXd g;
+  std::vector<bool> constrained;
+  std::vector<Eigen::Isometry3d> T_trial;
+  std::vector<PointXyz> p_trial;
+  int accepted = 0;
+  for (int attempts = 0; accepted < options.max_iterations && attempts < 3 * options.max_iterations;
+       ++attempts) {
+    if (!ba->Linearise(T, state->point, true, lambda, &S, &g, &constrained)) return false;
+    const Eigen::VectorXd dy = -S.ldlt().solve(g);
+    if (!dy.allFinite()) return false;
+    p_trial = state->point;
+    ba->StepPoints(dy, &p_trial);
+    T_trial = T;
+    for (size_t k = 1; k < T.size(); ++k) T_trial[k] = ApplyDelta(T[k], dy.data() + 6 * (k - 1));
+    const double new_cost = ba->Cost(T_trial, p_trial);
+    if (new_cost < cost) {
+      ++accepted;
+      const double decrease = (cost - new_cost) / std::max(cost, 1e-12);
+      T.swap(T_trial);
+      state->point.swap(p_trial);
+      cost = new_cost;
+      lambda = std::max(1e-9, lambda / 5.0);
+      if (decrease < 1e-7 || dy.norm() < 1e-10) break;
+    } else {
+      lambda *= 10.0;
+      if (lambda > 1e6) break;
+    }
+  }
+  *iterations += accepted;
+  return true;
+}
+
+// Covariance of the newest relative pose T_ij (see the header), unit pixel noise, at the
+// state: the robust Gauss-Newton Hessian with the points marginalised (WindowBa::Linearise,
+// lambda 0), inverted, then delta_ij = delta_j - Ad(T_ij^-1) delta_i.
+bool LastRelativeCovariance(WindowBa* ba, const BaState& state, Matrix6d* cov) {
+  Eigen::MatrixXd S;
+  Eigen::VectorXd g;
+  std::vector<bool> constrained;
+  if (!ba->Linearise(state.T0_o_k, state.point, true, 0.0, &S, &g, &constrained)) return false;
   const size_t n = state.T0_o_k.size();
   const size_t i = n - 2, j = n - 1;
-  const auto block = [&](size_t k) {
-    return static_cast<int>(std::find(free.begin(), free.end(), k) - free.begin());
-  };
-  const int bj = block(j), bi = block(i);
-  if (bj == static_cast<int>(free.size())) return false;  // the newest keyframe is unconstrained
-  const Matrix6d s_jj = poses.block<6, 6>(6 * bj, 6 * bj);
+  if (!constrained[j]) return false;  // the newest keyframe is unconstrained
+  S = 0.5 * (S + S.transpose());
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
+  const Eigen::MatrixXd poses = ldlt.solve(Eigen::MatrixXd::Identity(S.rows(), S.cols()));
+  const int bj = static_cast<int>(6 * (j - 1));
+  const Matrix6d s_jj = poses.block<6, 6>(bj, bj);
   *cov = s_jj;
-  if (bi < static_cast<int>(free.size())) {
+  if (i >= 1 && constrained[i]) {
+    const int bi = static_cast<int>(6 * (i - 1));
     // delta_ij = delta_j - A delta_i, A = Ad(T_ij^-1).
     const Eigen::Isometry3d T_ij = state.T0_o_k[i].inverse() * state.T0_o_k[j];
     const Matrix6d A = Adjoint(T_ij.inverse());
-    const Matrix6d cross = A * poses.block<6, 6>(6 * bi, 6 * bj);  // Cov(A delta_i, delta_j)
-    *cov = s_jj + A * poses.block<6, 6>(6 * bi, 6 * bi) * A.transpose() - cross - cross.transpose();
+    const Matrix6d cross = A * poses.block<6, 6>(bi, bj);  // Cov(A delta_i, delta_j)
+    *cov = s_jj + A * poses.block<6, 6>(bi, bi) * A.transpose() - cross - cross.transpose();
   }
   *cov = 0.5 * (*cov + cov->transpose());
   return cov->allFinite();
@@ -393,15 +616,8 @@ void BuildProblem(const StereoCamera& camera, const std::vector<BaKeyframe>& win
   if (!options.motion_prior) return;
   for (size_t k = 1; k < window.size() && k < state->delta.size(); ++k) {
     const BaKeyframe& kf = window[k];
-    if (!kf.has_motion) continue;
-    Eigen::Matrix<double, 6, 6> sqrt_information;
-    const Eigen::Matrix<double, 6, 6> cov_e = Se3BetweenErrorCovariance(
-        kf.T_prev_camera.linear(), options.motion_prior_covariance_scale * kf.motion_covariance);
-    const Eigen::Matrix<double, 6, 6> information =
-        cov_e.ldlt().solve(Eigen::Matrix<double, 6, 6>::Identity());
-    if (!SqrtInformation<6>(0.5 * (information + information.transpose()), &sqrt_information)) {
-      continue;  // no usable covariance: the reprojections alone
-    }
+    Matrix6d sqrt_information;
+    if (!MotionPriorSqrtInformation(kf, options, &sqrt_information)) continue;
     double* di = state->delta[k - 1].data();
     double* dj = state->delta[k].data();
     problem->AddResidualBlock(KeyframeMotionCost::Create(state->T0_o_k[k - 1], state->T0_o_k[k],
@@ -437,15 +653,20 @@ LocalBaResult LocalBundleAdjustment(const StereoCamera& camera,
 
   // Solve, drop the observations the solution does not explain, solve again.
   for (int round = 0; round < 2; ++round) {
-    {
+    bool solved = false;
+    if (options.use_ceres) {
       ceres::Problem problem;
       BuildProblem(camera, window, tracks, options, sigma_px, keep, &state, &problem);
-      if (problem.NumResidualBlocks() == 0 || !Solve(options, &problem, &result.iterations)) {
-        result.message = "the window's bundle adjustment did not converge";
-        return result;
-      }
+      solved = problem.NumResidualBlocks() > 0 && Solve(options, &problem, &result.iterations);
+      if (solved) Relinearise(&state);
+    } else {
+      WindowBa ba(camera, window, tracks, options, sigma_px, keep);
+      solved = !ba.empty() && SolveAnalytic(options, &ba, &state, &result.iterations);
     }
-    Relinearise(&state);
+    if (!solved) {
+      result.message = "the window's bundle adjustment did not converge";
+      return result;
+    }
     if (round == 1) break;
     int outliers = 0;
     for (size_t t = 0; t < tracks.size(); ++t) {
@@ -472,12 +693,11 @@ LocalBaResult LocalBundleAdjustment(const StereoCamera& camera,
   }
   result.final_rms_px = RmsPx(camera, tracks, keep, state);
 
-  // Covariance at the solution (delta = 0 there after Relinearise).
+  // Covariance at the solution (either solver's).
   {
-    ceres::Problem problem;
-    BuildProblem(camera, window, tracks, options, sigma_px, keep, &state, &problem);
+    WindowBa ba(camera, window, tracks, options, sigma_px, keep);
     Matrix6d cov;
-    if (LastRelativeCovariance(state, &problem, &cov)) {
+    if (LastRelativeCovariance(&ba, state, &cov)) {
       result.covariance_ok = true;
       result.covariance_last = sigma_px * sigma_px * cov;
     }

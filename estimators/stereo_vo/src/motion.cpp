@@ -8,16 +8,13 @@
 #include <limits>
 #include <memory>
 
+#include "ba_kernels.hpp"
 #include "fusionloc/stereo_vo/reprojection_cost.hpp"
 
 namespace fl::vo {
 namespace {
 
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d s;
-  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return s;
-}
+using ba::Skew;
 
 }  // namespace
 
@@ -432,32 +429,15 @@ class TwoViewBa {
 
  private:
   bool Residual(const Vec3& p, const Vec3& obs, double c, Vec3* r) const {
-    if (!(p.z() > 1e-6)) return false;
-    const double iz = 1.0 / p.z();
-    (*r)(0) = cam_.fx * p.x() * iz + cam_.cx - obs(0);
-    (*r)(1) = cam_.fy * p.y() * iz + cam_.cy - obs(1);
-    (*r)(2) = cam_.fx * (p.x() - cam_.baseline) * iz + cam_.cx - obs(2) - c * Basis(obs);
+    if (!ba::StereoResidual(cam_, p, obs, r)) return false;
+    (*r)(2) -= c * Basis(obs);
     return true;
   }
   // How the offset at the image centre scales at this observation (OffsetBasis).
   double Basis(const Vec3& obs) const { return OffsetBasis(cam_, obs(2)); }
-  Mat3 ProjectionJacobian(const Vec3& p) const {
-    const double iz = 1.0 / p.z(), iz2 = iz * iz;
-    Mat3 J;
-    J << cam_.fx * iz, 0, -cam_.fx * p.x() * iz2,  //
-        0, cam_.fy * iz, -cam_.fy * p.y() * iz2,   //
-        cam_.fx * iz, 0, -cam_.fx * (p.x() - cam_.baseline) * iz2;
-    return J;
-  }
-  // Huber: rho(s) = s (s <= h^2), 2 h sqrt(s) - h^2 otherwise; IRLS weight rho'(s).
-  double Rho(double s) const {
-    const double h2 = huber_ * huber_;
-    return s <= h2 ? s : 2.0 * huber_ * std::sqrt(s) - h2;
-  }
-  double Weight(double s) const {
-    const double h2 = huber_ * huber_;
-    return s <= h2 ? 1.0 : huber_ / std::sqrt(s);
-  }
+  Mat3 ProjectionJacobian(const Vec3& p) const { return ba::StereoProjectionJacobian(cam_, p); }
+  double Rho(double s) const { return ba::Huber{huber_}.Rho(s); }
+  double Weight(double s) const { return ba::Huber{huber_}.Weight(s); }
 
   // A point's 3D measurements (PointMeasurements), W scaled by the pixel sigma; k: the point.
   struct Measured {

@@ -22,6 +22,15 @@
 // first solve the observations whose error exceeds outlier_threshold_px are removed and the
 // window is solved again.
 //
+// Solver: by default an analytic Levenberg-Marquardt as the two-view refinement's (motion.cpp):
+// each iteration linearises at the current poses and points, eliminates every point's 3x3
+// block, solves the 6(n-1) pose system and back-substitutes the points, keeping the step if
+// the robust cost fell. With q = R_k^T (p_o - t_k), the point in keyframe k:
+//   reprojection  r = pi(q) - z:      d r/d p_o = Jpi(q) R_k^T,  d r/d delta_k = Jpi(q) [-I, [q]x]
+//   laser point   r = s W (q - m):    d r/d p_o = s W R_k^T,     d r/d delta_k = s W [-I, [q]x]
+// (keyframe 0: q = p_o, no pose block); the motion priors' Jacobians by autodiff of their
+// functor. use_ceres solves the same residual blocks (BuildProblem) with Ceres instead.
+//
 // Covariance of the newest relative pose T_ij (i = n-2, j = n-1, camera frames): from the
 // window's Hessian with the points marginalised (Schur complement of J^T J), scaled by
 // the pixel noise sigma^2: T_ij = T_o_i^-1 T_o_j, delta_ij = delta_j - Ad(T_ij^-1) delta_i.
@@ -70,8 +79,11 @@ struct LocalBaOptions {
   // laser-aided run worse, 0.615 -> 0.659 % drift (its laser depths put the path 0.3 % long
   // where stereo puts it 0.4 % short; docs/STEREO_VO.md); the frame-to-frame laser terms stay.
   bool laser_points = false;
-  // [-] sparse Schur (true) or dense Schur (false) linear solver; dense is faster for the small
-  // windows (at most ~10 keyframes) this is meant for.
+  // [-] false: the analytic Levenberg-Marquardt on the reduced (Schur complement) system below
+  // (fast); true: the same problem (BuildProblem) solved by Ceres, the reference.
+  bool use_ceres = false;
+  // [-] use_ceres only: sparse Schur (true) or dense Schur (false) linear solver; dense is
+  // faster for the small windows (at most ~10 keyframes) this is meant for.
   bool sparse_schur = false;
   template <class A>
   void Serialize(A* a) {
@@ -85,6 +97,7 @@ struct LocalBaOptions {
     a->Visit("motion_prior", &motion_prior);
     a->Visit("motion_prior_covariance_scale", &motion_prior_covariance_scale);
     a->Visit("laser_points", &laser_points);
+    a->Visit("use_ceres", &use_ceres);
     a->Visit("sparse_schur", &sparse_schur);
   }
   fl::Status Validate() const;
