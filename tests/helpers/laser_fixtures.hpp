@@ -52,6 +52,14 @@ class LaserWorld {
     return w;
   }
 
+  // A straight corridor with smooth walls at y = ±width/2 from x = 0 to x = length, closed at
+  // both ends: along its axis a laser of shorter range than the length sees nothing.
+  static LaserWorld Corridor(double length, double width) {
+    LaserWorld w;
+    w.AddBox(0.0, -width / 2, length, width / 2);
+    return w;
+  }
+
   // Range along a ray (origin, unit direction); +inf if nothing within max_range.
   double Cast(const Eigen::Vector2d& o, const Eigen::Vector2d& d, double max_range) const {
     double best = std::numeric_limits<double>::infinity();
@@ -124,26 +132,10 @@ struct LoopRun {
   std::vector<fl::Pose2> odom;   // T_odom_base (drifting)
 };
 
-// Drives counter-clockwise around the corridor (rectangle x ±8.5, y ±4.5, rounded corners)
-// starting at (-8.5, -4.5) heading +x, at 10 scans per second.
-inline LoopRun MakeLoopRun(const LaserWorld& world, const LoopRunOptions& o) {
-  // Waypoints of the loop.
-  const std::vector<Eigen::Vector2d> wp = {{-8.5, -4.5}, {8.5, -4.5}, {8.5, 4.5}, {-8.5, 4.5}};
-  std::vector<fl::Pose2> path;
-  for (int lap = 0; lap < o.laps; ++lap) {
-    for (int s = 0; s < 4; ++s) {
-      const Eigen::Vector2d a = wp[s], b = wp[(s + 1) % 4];
-      const double len = (b - a).norm();
-      const double heading = std::atan2(b.y() - a.y(), b.x() - a.x());
-      const int n = static_cast<int>(std::round(len / o.step_m));
-      for (int i = 0; i < n; ++i) path.emplace_back(a.x() + (b - a).x() * i / n, a.y() + (b - a).y() * i / n, heading);
-      // Turn in place at the corner in 0.15 rad steps.
-      const double next_heading = heading + M_PI / 2;
-      for (double t = 0.15; t < M_PI / 2; t += 0.15) path.emplace_back(b.x(), b.y(), fl::WrapAngle(heading + t));
-      (void)next_heading;
-    }
-  }
-  path.push_back(path.front());
+// Scans of `world` along `path` (T_world_base, the laser at the base) at 10 scans per second,
+// with odometry drifting by o's noise (the loop options of o are unused).
+inline LoopRun MakePathRun(const LaserWorld& world, const std::vector<fl::Pose2>& path,
+                           const LoopRunOptions& o) {
   LoopRun run;
   std::mt19937 rng(o.seed);
   std::normal_distribution<double> n01(0.0, 1.0);
@@ -163,6 +155,27 @@ inline LoopRun MakeLoopRun(const LaserWorld& world, const LoopRunOptions& o) {
     run.ranges.push_back(world.Scan(path[k], o.beams, o.rad0, o.radstep, o.max_range, o.range_noise, &rng));
   }
   return run;
+}
+
+// Drives counter-clockwise around the corridor (rectangle x ±8.5, y ±4.5, rounded corners)
+// starting at (-8.5, -4.5) heading +x, at 10 scans per second.
+inline LoopRun MakeLoopRun(const LaserWorld& world, const LoopRunOptions& o) {
+  // Waypoints of the loop.
+  const std::vector<Eigen::Vector2d> wp = {{-8.5, -4.5}, {8.5, -4.5}, {8.5, 4.5}, {-8.5, 4.5}};
+  std::vector<fl::Pose2> path;
+  for (int lap = 0; lap < o.laps; ++lap) {
+    for (int s = 0; s < 4; ++s) {
+      const Eigen::Vector2d a = wp[s], b = wp[(s + 1) % 4];
+      const double len = (b - a).norm();
+      const double heading = std::atan2(b.y() - a.y(), b.x() - a.x());
+      const int n = static_cast<int>(std::round(len / o.step_m));
+      for (int i = 0; i < n; ++i) path.emplace_back(a.x() + (b - a).x() * i / n, a.y() + (b - a).y() * i / n, heading);
+      // Turn in place at the corner in 0.15 rad steps.
+      for (double t = 0.15; t < M_PI / 2; t += 0.15) path.emplace_back(b.x(), b.y(), fl::WrapAngle(heading + t));
+    }
+  }
+  path.push_back(path.front());
+  return MakePathRun(world, path, o);
 }
 
 }  // namespace fl::test

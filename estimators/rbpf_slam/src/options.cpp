@@ -171,6 +171,9 @@ Status GraphOptions::Validate() const {
     return Status::Error("graph.divergence_min_gain = " + Num(divergence_min_gain) +
                          " must be in [0, 1] (an inlier-fraction difference)");
   }
+  FL_RETURN_IF_ERROR(NonNegative("graph.divergence_odometry_chi2", divergence_odometry_chi2));
+  FL_RETURN_IF_ERROR(
+      Positive("graph.divergence_odometry_rms_ratio", divergence_odometry_rms_ratio));
   FL_RETURN_IF_ERROR(NonNegative("graph.edge_sigma", edge_sigma));
   FL_RETURN_IF_ERROR(Positive("graph.filter_edge_sigma_scale", filter_edge_sigma_scale));
   FL_RETURN_IF_ERROR(Positive("graph.filter_edge_min_sigma_m", filter_edge_min_sigma_m));

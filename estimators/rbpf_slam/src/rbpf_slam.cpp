@@ -385,9 +385,15 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
                                                keyframes_[j].points_base, odom_rel, opt_.icp);
         const bool alt_ok = NearStart(alt, odom_rel);
         // The better fit of the two starts; when it is the filter's, it must agree with the
-        // odometry's (two independent starts, one answer).
-        const bool use_alt =
-            !icp_ok || alt.inlier_fraction > icp.inlier_fraction + opt_.graph.divergence_min_gain;
+        // odometry's (two independent starts, one answer). Where both fit about as well (a
+        // featureless corridor), the odometry's wins when the filter's motion is unlikely
+        // under the motion model: the filter slid (options.hpp).
+        const bool clearly_better =
+            alt.inlier_fraction > icp.inlier_fraction + g.divergence_min_gain;
+        const bool filter_slid = g.divergence_odometry_chi2 > 0.0 && icp_ok && alt_ok &&
+                                 alt.rms <= g.divergence_odometry_rms_ratio * icp.rms &&
+                                 OdometryChi2(from, j, prior) > g.divergence_odometry_chi2;
+        const bool use_alt = !icp_ok || clearly_better || filter_slid;
         const IcpResult& best = use_alt ? alt : icp;
         const fl::Pose2 agree = alt.T_ref_query.between(best.T_ref_query);
         const bool corroborated = use_alt || Within(agree, 0.05, 0.02);
@@ -434,6 +440,21 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
     graph_.AddEdge(FilterEdge(from, j));
   }
   if (opt_.graph.enabled) SearchLoopClosure(j, res);
+}
+
+Eigen::Vector2d RbpfSlam::OdometrySigma(const Anchor& from, int j, double scale) const {
+  const GraphOptions& g = opt_.graph;
+  const MotionOptions& m = opt_.motion;
+  const fl::Pose2 odom = from.odom.between(keyframes_[j].odom);
+  const double d = std::hypot(odom.x, odom.y), r = std::abs(odom.theta);
+  return {std::max(scale * (m.srr * d + m.srt * r), g.filter_edge_min_sigma_m),
+          std::max(scale * (m.stt * r + m.str * d), g.filter_edge_min_sigma_rad)};
+}
+
+double RbpfSlam::OdometryChi2(const Anchor& from, int j, const fl::Pose2& T_i_j) const {
+  const Eigen::Vector2d sigma = OdometrySigma(from, j, 1.0);
+  const fl::Pose2 e = OdometryFromAnchor(from, j).between(T_i_j);
+  return (e.x * e.x + e.y * e.y) / (sigma(0) * sigma(0)) + e.theta * e.theta / (sigma(1) * sigma(1));
 }
 
 fl::Pose2 RbpfSlam::OdometryFromAnchor(const Anchor& from, int j) const {
@@ -563,7 +584,6 @@ KeyframeFactor RbpfSlam::Factor(int i, int j, const IcpResult& icp, bool is_loop
 
 PoseGraphEdge RbpfSlam::FilterEdge(const Anchor& from, int j) const {
   const GraphOptions& g = opt_.graph;
-  const MotionOptions& m = opt_.motion;
   PoseGraphEdge e;
   e.i = from.keyframe;
   e.j = j;
@@ -571,11 +591,8 @@ PoseGraphEdge RbpfSlam::FilterEdge(const Anchor& from, int j) const {
   // The std grows with the odometry's motion since the anchoring scan (the motion model's
   // noise, which the filter's particles sampled), not with the filter's (which includes any
   // correction).
-  const fl::Pose2 odom = from.odom.between(keyframes_[j].odom);
-  const double d = std::hypot(odom.x, odom.y), r = std::abs(odom.theta);
-  const double k = g.filter_edge_sigma_scale;
-  const double s_xy = std::max(k * (m.srr * d + m.srt * r), g.filter_edge_min_sigma_m);
-  const double s_th = std::max(k * (m.stt * r + m.str * d), g.filter_edge_min_sigma_rad);
+  const Eigen::Vector2d sigma = OdometrySigma(from, j, g.filter_edge_sigma_scale);
+  const double s_xy = sigma(0), s_th = sigma(1);
   e.information =
       Eigen::Vector3d(1.0 / (s_xy * s_xy), 1.0 / (s_xy * s_xy), 1.0 / (s_th * s_th)).asDiagonal();
   e.huber_scale = g.filter_edge_huber;

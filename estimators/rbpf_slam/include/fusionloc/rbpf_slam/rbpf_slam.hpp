@@ -201,6 +201,12 @@ class RbpfSlam {
   bool ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, ScanResult* result);
   // The odometry's relative pose from anchor `from`'s keyframe to keyframe j.
   fl::Pose2 OdometryFromAnchor(const Anchor& from, int j) const;
+  // The motion model's std (σ_xy [m], σ_θ [rad]) for the odometry's motion from anchor `from`
+  // to keyframe j, times `scale`, at least graph.filter_edge_min_sigma_*.
+  Eigen::Vector2d OdometrySigma(const Anchor& from, int j, double scale) const;
+  // χ² of a relative pose T_i_j from `from`'s keyframe to keyframe j against the odometry's
+  // (OdometryFromAnchor), whitened by OdometrySigma with scale 1.
+  double OdometryChi2(const Anchor& from, int j, const fl::Pose2& T_i_j) const;
   // Lost-track search for new keyframe j (options.hpp, recovery_*), `map_before_scan` the best
   // particle's map before j's scan entered it, `icp_from_filter` the successful ICP against
   // keyframe i from the filter's pose (nullptr if it failed: then a correlative search
