@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <random>
 #include <string>
 
 #include "fusionloc/rbpf_slam/scan_matcher.hpp"
@@ -178,6 +179,87 @@ TEST(IcpCovariance, IsLargeAlongACorridorAxis) {
   EXPECT_GT(m.mean, 8.0);
   EXPECT_LT(m.mean, 13.0);
   EXPECT_GT(m.mean_sigma_x, 1.0);
+}
+
+// Points of a Hokuyo-like scan (682 beams over 240°, 10 m range) from `pose`, range noise
+// `noise` drawn from rng.
+std::vector<Eigen::Vector2d> UrgPoints(const test::LaserWorld& world, const fl::Pose2& pose,
+                                       double noise, std::mt19937* rng) {
+  const double fov = 240.0 * M_PI / 180.0, step = fov / 681;
+  const auto r = world.Scan(pose, 682, -fov / 2, step, 10.0, noise, rng);
+  std::vector<Eigen::Vector2d> pts;
+  for (int k = 0; k < 682; ++k) {
+    if (!std::isfinite(r[k])) continue;
+    pts.emplace_back(r[k] * std::cos(-fov / 2 + k * step), r[k] * std::sin(-fov / 2 + k * step));
+  }
+  return pts;
+}
+
+TEST(Icp, ScanRangeNoiseMeasuresTheSensorsNoise) {
+  const test::LaserWorld room = test::LaserWorld::RoomWithBoxes();
+  std::mt19937 rng(3);
+  EXPECT_LT(ScanRangeNoise(UrgPoints(room, fl::Pose2(-6.0, -4.5, 0.1), 0.0, &rng)), 0.001);
+  for (double noise : {0.01, 0.03, 0.1}) {
+    const double est = ScanRangeNoise(UrgPoints(room, fl::Pose2(-6.0, -4.5, 0.1), noise, &rng));
+    EXPECT_NEAR(est, noise, 0.15 * noise) << "noise " << noise;
+  }
+  EXPECT_EQ(ScanRangeNoise({{1.0, 0.0}, {1.0, 0.1}}), 0.0) << "too few points";
+}
+
+TEST(Icp, WideNormalsSeeThatNoisyCorridorWallsLeaveTheAxisFree) {
+  // 10 cm range noise (the simulator's laser) in a featureless corridor: normals fitted within
+  // 0.3 m follow the noise (tens of degrees off the wall) and make up information along the
+  // axis: ICP then reports centimetres there while its error is a decimetre. The noise-wide
+  // normals (icp.normal_radius_per_noise) say the axis is free, and that the narrow ones' claim
+  // was the noise's.
+  test::LaserWorld corridor;
+  corridor.AddSegment({-50, -1.25}, {50, -1.25});
+  corridor.AddSegment({-50, 1.25}, {50, 1.25});
+  std::mt19937 rng(5);
+  IcpOptions fixed;
+  fixed.normal_radius_per_noise = 0.0;
+  fixed.normal_gap_per_noise = 0.0;
+  double wide_sigma_x = 0.0, fixed_sigma_x = 0.0, err2 = 0.0;
+  int noise_made = 0, n = 0;
+  for (int t = 0; t < 20; ++t) {
+    const fl::Pose2 pose_i(-20.0 + 2.0 * t, 0.3 * std::sin(t), 0.03 * std::cos(t));
+    const fl::Pose2 T_i_j(0.5, 0.02, 0.01);
+    const auto ref_pts = UrgPoints(corridor, pose_i, 0.1, &rng);
+    const auto query = UrgPoints(corridor, pose_i * T_i_j, 0.1, &rng);
+    const IcpResult wide = AlignPointToLine(ComputeNormals(ref_pts, IcpOptions()), query,
+                                            T_i_j * fl::Pose2(0.05, 0.0, 0.0), IcpOptions());
+    const IcpResult narrow = AlignPointToLine(ComputeNormals(ref_pts, fixed), query,
+                                              T_i_j * fl::Pose2(0.05, 0.0, 0.0), fixed);
+    if (!wide.ok || !narrow.ok) continue;
+    ++n;
+    wide_sigma_x += std::sqrt(wide.covariance(0, 0));
+    fixed_sigma_x += std::sqrt(narrow.covariance(0, 0));
+    noise_made += wide.noise_made_dims;
+    EXPECT_EQ(narrow.noise_made_dims, 0);
+    err2 += std::pow(wide.T_ref_query.x - T_i_j.x, 2);
+    EXPECT_NEAR(wide.T_ref_query.y, T_i_j.y, 0.05);
+  }
+  ASSERT_GE(n, 15);
+  std::cout << "noisy corridor: reported std along the axis " << wide_sigma_x / n
+            << " m (fixed normals: " << fixed_sigma_x / n << " m), RMS error "
+            << std::sqrt(err2 / n) << " m, noise-made directions in " << noise_made << " of " << n
+            << "\n";
+  EXPECT_GT(wide_sigma_x / n, 1.0);
+  EXPECT_LT(fixed_sigma_x / n, 0.05) << "the failure the wide normals are for";
+  EXPECT_GE(noise_made, n - 1);
+}
+
+TEST(Icp, WideNormalsAreThePointsOwnOnACleanScan) {
+  // 1 cm noise: the noise-wide fit is no wider than normal_radius, so nothing changes.
+  const test::LaserWorld room = test::LaserWorld::RoomWithBoxes();
+  std::mt19937 rng(7);
+  const auto pts = UrgPoints(room, fl::Pose2(5.0, -4.6, 0.0), 0.01, &rng);
+  const auto normals = ComputeNormals(pts, IcpOptions());
+  ASSERT_GT(normals.size(), 300u);
+  for (const PointNormal& pn : normals) ASSERT_EQ(pn.n_wide, pn.n);
+  const auto plain = ComputeNormals(pts);
+  ASSERT_EQ(plain.size(), normals.size());
+  for (size_t i = 0; i < plain.size(); ++i) EXPECT_EQ(plain[i].n, normals[i].n);
 }
 
 // The Jacobian of one pair (PoseJacobian of the normal, used by the steps and the covariance)

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iostream>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -590,6 +591,27 @@ test::LoopRun FeaturelessCorridorRun(double length, unsigned seed) {
   return test::MakePathRun(test::LaserWorld::Corridor(60.0, 2.5), path, lo);
 }
 
+// The final trajectory's distance along the corridor over the odometry's, for the options o
+// (10 particles, filter seed `seed`) on `run`.
+double CorridorDistanceKept(const test::LoopRun& run, unsigned seed, RbpfSlamOptions o,
+                            RbpfSlamStats* stats) {
+  o.particles = 10;
+  o.seed = static_cast<int>(seed);
+  RbpfSlam slam(o);
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    EXPECT_TRUE(
+        slam.AddScan(MakeScan(run.utimes[k], run.ranges[k], kCorridorRad0, kCorridorRadStep),
+                     run.odom[k], &r)
+            .ok());
+  }
+  slam.Finish();
+  *stats = slam.stats();
+  const auto traj = slam.Trajectory();
+  const double odom = run.odom.front().between(run.odom.back()).x;
+  return (traj.back().T_world_base.x - traj.front().T_world_base.x) / odom;
+}
+
 TEST(RbpfSlam, FilterKeepsTheOdometrysMotionAlongAFeaturelessCorridor) {
   // Along the corridor's axis the scans say nothing; the likelihood field pulls the filter
   // toward the edge of its map, so that without the odometry check the filter covers about
@@ -600,25 +622,12 @@ TEST(RbpfSlam, FilterKeepsTheOdometrysMotionAlongAFeaturelessCorridor) {
   double with_sum = 0.0, without_sum = 0.0;
   for (unsigned seed : {1u, 2u, 3u}) {
     const test::LoopRun run = FeaturelessCorridorRun(40.0, seed);
-    const double odom = run.odom.front().between(run.odom.back()).x;
-    ASSERT_NEAR(odom, 40.0, 1.0);
+    ASSERT_NEAR(run.odom.front().between(run.odom.back()).x, 40.0, 1.0);
     auto travelled = [&](double chi2, RbpfSlamStats* stats) {
       RbpfSlamOptions o;
-      o.particles = 10;
-      o.seed = static_cast<int>(seed);
       o.graph.divergence_odometry_chi2 = chi2;
-      RbpfSlam slam(o);
-      for (size_t k = 0; k < run.utimes.size(); ++k) {
-        ScanResult r;
-        EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k], kCorridorRad0,
-                                          kCorridorRadStep),
-                                 run.odom[k], &r)
-                        .ok());
-      }
-      slam.Finish();
-      *stats = slam.stats();
-      const auto traj = slam.Trajectory();
-      return (traj.back().T_world_base.x - traj.front().T_world_base.x) / odom;
+      o.graph.degenerate_from_odometry = false;  // the check alone (next test: with it)
+      return CorridorDistanceKept(run, seed, o, stats);
     };
     RbpfSlamStats with_check, without_check;
     const double with = travelled(RbpfSlamOptions().graph.divergence_odometry_chi2, &with_check);
@@ -630,6 +639,38 @@ TEST(RbpfSlam, FilterKeepsTheOdometrysMotionAlongAFeaturelessCorridor) {
   }
   EXPECT_GT(with_sum / 3, 0.75) << "fraction of the odometry's distance, mean of 3 seeds";
   EXPECT_LT(without_sum / 3, 0.65) << "the slide this check is for";
+}
+
+TEST(RbpfSlam, KeyframesKeepTheOdometrysMotionAlongACorridorsUnseenAxis) {
+  // With the noise-wide normals (icp.normal_radius_per_noise) ICP sees that the corridor's axis
+  // is unconstrained (its own normals, fitted within 0.3 m of 10 cm noise, said otherwise), and
+  // each keyframe takes the odometry's motion along it (graph.degenerate_from_odometry): the
+  // filter covers 93-96 % of the odometry's distance instead of 81-85 % (2026-12-06, seeds 1-3;
+  // the rest: keyframes whose ICP fails the RMS gate, 6-9 of 44, keep the filter's motion).
+  double with_sum = 0.0, without_sum = 0.0;
+  for (unsigned seed : {1u, 2u, 3u}) {
+    const test::LoopRun run = FeaturelessCorridorRun(40.0, seed);
+    auto travelled = [&](bool keep, RbpfSlamStats* stats) {
+      RbpfSlamOptions o;
+      o.graph.degenerate_from_odometry = keep;
+      return CorridorDistanceKept(run, seed, o, stats);
+    };
+    RbpfSlamStats with_stats, without_stats;
+    const double with = travelled(true, &with_stats);
+    const double without = travelled(false, &without_stats);
+    std::cout << "seed " << seed << ": " << with << " of the odometry's distance kept, "
+              << without << " without (" << with_stats.degenerate_kept << " of "
+              << with_stats.keyframes << " keyframes moved, ICP failed at "
+              << with_stats.icp_failures << ")\n";
+    EXPECT_GT(with_stats.degenerate_kept, with_stats.keyframes / 2) << "seed " << seed;
+    EXPECT_EQ(without_stats.degenerate_kept, 0);
+    EXPECT_GT(with, without + 0.05) << "seed " << seed;
+    with_sum += with;
+    without_sum += without;
+  }
+  EXPECT_GT(with_sum / 3, 0.91) << "fraction of the odometry's distance, mean of 3 seeds";
+  EXPECT_LT(with_sum / 3, 1.03) << "no overshoot either";
+  EXPECT_LT(without_sum / 3, 0.88);
 }
 
 TEST(RbpfSlam, LostTrackAfterAnOdometrySlipIsFoundOnTheMap) {

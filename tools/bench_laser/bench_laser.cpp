@@ -668,6 +668,7 @@ int main(int argc, char** argv) {
             .Add("map_rebuilds", static_cast<double>(st.map_rebuilds))
             .Add("rebuilds_continued", static_cast<double>(st.map_rebuilds_continued))
             .Add("divergences", static_cast<double>(st.divergences))
+            .Add("degenerate_kept", static_cast<double>(st.degenerate_kept))
             .Add("recoveries", static_cast<double>(st.recoveries))
             .Add("skipped_fast_turn", static_cast<double>(st.skipped_fast_turn))
             .Add("resamples", static_cast<double>(st.resamples))

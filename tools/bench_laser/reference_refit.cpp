@@ -65,7 +65,7 @@ RefitResult RefitReference(const std::vector<RefitScan>& scans, const fl::Pose2&
     }
     ScanToBasePoints(s, T_base_laser, options.grid.max_range, &points[k]);
     normals[k] =
-        ComputeNormals(points[k], options.icp.normal_radius, options.icp.normal_max_eigen_ratio);
+        ComputeNormals(points[k], options.icp);
   }
 
   PoseGraph2D graph;

@@ -12,42 +12,92 @@
 
 namespace fl::rbpf {
 
+double ScanRangeNoise(const std::vector<Eigen::Vector2d>& pts, double max_step) {
+  std::vector<double> d;
+  d.reserve(pts.size());
+  const double s2 = max_step * max_step;
+  for (size_t k = 1; k + 1 < pts.size(); ++k) {
+    if ((pts[k] - pts[k - 1]).squaredNorm() > s2 || (pts[k + 1] - pts[k]).squaredNorm() > s2) {
+      continue;
+    }
+    d.push_back(std::abs(pts[k - 1].norm() - 2.0 * pts[k].norm() + pts[k + 1].norm()));
+  }
+  if (d.size() < 10) return 0.0;
+  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+  return d[d.size() / 2] / (0.6745 * std::sqrt(6.0));
+}
+
+namespace {
+// The unit normal at pts[i] from a line fit (PCA) over its neighbours in scan order within
+// `radius` of it, not across a step above max_gap; false if fewer than 3 points or their scatter
+// is not a line (small / large eigenvalue > max_eigen_ratio).
+bool FitNormal(const std::vector<Eigen::Vector2d>& pts, int i, double radius,
+               double max_eigen_ratio, double max_gap, Eigen::Vector2d* normal) {
+  const int n = static_cast<int>(pts.size());
+  const double r2 = radius * radius, g2 = max_gap * max_gap;
+  int lo = i, hi = i;
+  while (lo > 0 && (pts[lo - 1] - pts[lo]).squaredNorm() <= g2 &&
+         (pts[lo - 1] - pts[i]).squaredNorm() <= r2) {
+    --lo;
+  }
+  while (hi < n - 1 && (pts[hi + 1] - pts[hi]).squaredNorm() <= g2 &&
+         (pts[hi + 1] - pts[i]).squaredNorm() <= r2) {
+    ++hi;
+  }
+  const int count = hi - lo + 1;
+  if (count < 3) return false;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (int k = lo; k <= hi; ++k) mean += pts[k];
+  mean /= count;
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (int k = lo; k <= hi; ++k) {
+    const Eigen::Vector2d d = pts[k] - mean;
+    cov += d * d.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
+  // A line: the small eigenvalue must be much smaller than the large one.
+  if (!(es.eigenvalues()(1) > 0.0) ||
+      es.eigenvalues()(0) > max_eigen_ratio * es.eigenvalues()(1)) {
+    return false;
+  }
+  *normal = es.eigenvectors().col(0).normalized();
+  return true;
+}
+}  // namespace
+
 std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts, double radius,
                                         double max_eigen_ratio, double max_gap) {
   std::vector<PointNormal> out;
   out.reserve(pts.size());
-  const int n = static_cast<int>(pts.size());
-  const double r2 = radius * radius, g2 = max_gap * max_gap;
-  for (int i = 0; i < n; ++i) {
-    // Neighbours in scan order on both sides, within `radius` of p_i, no gap above max_gap.
-    int lo = i, hi = i;
-    while (lo > 0 && (pts[lo - 1] - pts[lo]).squaredNorm() <= g2 &&
-           (pts[lo - 1] - pts[i]).squaredNorm() <= r2) {
-      --lo;
-    }
-    while (hi < n - 1 && (pts[hi + 1] - pts[hi]).squaredNorm() <= g2 &&
-           (pts[hi + 1] - pts[i]).squaredNorm() <= r2) {
-      ++hi;
-    }
-    const int count = hi - lo + 1;
-    if (count < 3) continue;
-    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-    for (int k = lo; k <= hi; ++k) mean += pts[k];
-    mean /= count;
-    Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
-    for (int k = lo; k <= hi; ++k) {
-      const Eigen::Vector2d d = pts[k] - mean;
-      cov += d * d.transpose();
-    }
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
-    // A line: the small eigenvalue must be much smaller than the large one.
-    if (!(es.eigenvalues()(1) > 0.0) ||
-        es.eigenvalues()(0) > max_eigen_ratio * es.eigenvalues()(1)) {
+  for (int i = 0; i < static_cast<int>(pts.size()); ++i) {
+    PointNormal pn;
+    if (!FitNormal(pts, i, radius, max_eigen_ratio, max_gap, &pn.n)) continue;
+    pn.p = pts[i];
+    pn.n_wide = pn.n;
+    out.push_back(pn);
+  }
+  return out;
+}
+
+std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts,
+                                        const IcpOptions& o) {
+  const double noise = ScanRangeNoise(pts);
+  const double wide_radius = std::max(o.normal_radius, o.normal_radius_per_noise * noise);
+  const double wide_gap = std::max(o.normal_max_gap, o.normal_gap_per_noise * noise);
+  const bool wider = wide_radius > o.normal_radius || wide_gap > o.normal_max_gap;
+  std::vector<PointNormal> out;
+  out.reserve(pts.size());
+  for (int i = 0; i < static_cast<int>(pts.size()); ++i) {
+    PointNormal pn;
+    if (!FitNormal(pts, i, o.normal_radius, o.normal_max_eigen_ratio, o.normal_max_gap, &pn.n)) {
       continue;
     }
-    PointNormal pn;
     pn.p = pts[i];
-    pn.n = es.eigenvectors().col(0).normalized();
+    // Where the wide fit is no line (a corner, clutter), the point's own normal stands.
+    if (!wider ||
+        !FitNormal(pts, i, wide_radius, o.normal_max_eigen_ratio, wide_gap, &pn.n_wide)) {
+      pn.n_wide = pn.n;
+    }
     out.push_back(pn);
   }
   return out;
@@ -184,6 +234,7 @@ class PointHash {
   std::vector<int> slots_;          // open addressing (load <= 1/2): cell index or -1
   int shift_ = 60;
 };
+
 }  // namespace
 
 IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
@@ -264,6 +315,8 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
     const double c = std::cos(T.theta), s = std::sin(T.theta);
     Eigen::Matrix3d Hs = Eigen::Matrix3d::Zero();
     Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+    Eigen::Matrix3d Hw = Eigen::Matrix3d::Zero();  // H and M with the wide normals (icp.hpp)
+    Eigen::Matrix3d Mw = Eigen::Matrix3d::Zero();
     double e2 = 0.0, e_lag = 0.0, length_sq = 0.0;
     int n = 0, prev_index = -2;
     double prev_e = 0.0;
@@ -277,6 +330,11 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
       const Eigen::Vector3d J = PoseJacobian(nj, q, c, s);
       Hs.noalias() += J * J.transpose();
       M.noalias() += (e * e) * J * J.transpose();
+      const Eigen::Vector2d& nw =
+          reference[j].n_wide.squaredNorm() > 0.0 ? reference[j].n_wide : nj;
+      const Eigen::Vector3d Jw = PoseJacobian(nw, q, c, s);
+      Hw.noalias() += Jw * Jw.transpose();
+      Mw.noalias() += (e * e) * Jw * Jw.transpose();
       e2 += e * e;
       if (prev_index == static_cast<int>(i) - 1) e_lag += e * prev_e;
       prev_index = static_cast<int>(i);
@@ -284,12 +342,22 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
       length_sq += q.squaredNorm();
       ++n;
     }
+    r.length_m = n > 0 ? std::sqrt(length_sq / n) : 1.0;
+    if (Hw != Hs) {
+      // Directions the wide normals leave unconstrained and the point's own ones do not: their
+      // information came from the normals' noise (icp.hpp).
+      int narrow = 0, wide = 0;
+      WellConstrainedProjector(Hs, r.length_m, o.degeneracy_ratio, &narrow);
+      WellConstrainedProjector(Hw, r.length_m, o.degeneracy_ratio, &wide);
+      r.noise_made_dims = std::max(0, wide - narrow);
+      Hs = Hw;
+      M = Mw;
+    }
     r.hessian = Hs;
     r.sigma = n > 3 ? std::sqrt(e2 / (n - 3)) : o.max_rms;
     r.correlation = e2 > 0.0 ? e_lag / e2 : 0.0;
     r.degenerate_dims =
-        IcpCovariance(Hs, M, n, r.correlation, n > 0 ? std::sqrt(length_sq / n) : 1.0, o,
-                      &r.covariance, &r.information);
+        IcpCovariance(Hs, M, n, r.correlation, r.length_m, o, &r.covariance, &r.information);
   }
   if (pairs < o.min_points) {
     r.failure = "only " + std::to_string(pairs) + " point pairs (need " +

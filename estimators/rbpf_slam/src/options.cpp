@@ -109,6 +109,12 @@ Status IcpOptions::Validate() const {
     return Status::Error("icp.final_correspondence_m must be <= icp.max_correspondence_m");
   }
   FL_RETURN_IF_ERROR(Positive("icp.normal_radius", normal_radius));
+  FL_RETURN_IF_ERROR(Positive("icp.normal_max_gap", normal_max_gap));
+  if (!(normal_radius_per_noise >= 0.0) || !(normal_gap_per_noise >= 0.0)) {
+    return Status::Error(
+        "icp.normal_radius_per_noise and icp.normal_gap_per_noise must be >= 0 (0 = fixed "
+        "icp.normal_radius / icp.normal_max_gap; defaults 10 and 6)");
+  }
   if (!(normal_max_eigen_ratio > 0.0 && normal_max_eigen_ratio <= 1.0)) {
     return Status::Error("icp.normal_max_eigen_ratio must be in (0, 1]");
   }
@@ -117,7 +123,7 @@ Status IcpOptions::Validate() const {
   FL_RETURN_IF_ERROR(Positive("icp.floor_sigma_theta", floor_sigma_theta));
   FL_RETURN_IF_ERROR(Positive("icp.max_sigma_xy", max_sigma_xy));
   if (!(degeneracy_ratio >= 0.0 && degeneracy_ratio < 1.0)) {
-    return Status::Error("icp.degeneracy_ratio must be in [0, 1) (0.02 is the default)");
+    return Status::Error("icp.degeneracy_ratio must be in [0, 1) (0.05 is the default)");
   }
   if (max_sigma_xy <= floor_sigma_xy) {
     return Status::Error("icp.max_sigma_xy must be larger than icp.floor_sigma_xy");

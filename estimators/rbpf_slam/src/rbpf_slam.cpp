@@ -352,8 +352,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   Keyframe kf;
   kf.utime = utime;
   kf.points_base = hits_base_;
-  kf.normals_base =
-      ComputeNormals(kf.points_base, opt_.icp.normal_radius, opt_.icp.normal_max_eigen_ratio);
+  kf.normals_base = ComputeNormals(kf.points_base, opt_.icp);
   kf.path_length = path_length_;
   kf.odom = input_.odom();
   kf.odometry_jumps = stats_.odometry_jumps;
@@ -421,6 +420,15 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
         icp_ok = icp.ok;
       }
     }
+    if (icp_ok && g.degenerate_from_odometry && icp.noise_made_dims > 0 &&
+        from.odometry_jumps == keyframes_[j].odometry_jumps) {
+      const fl::Pose2 kept = OdometryAlongDegenerate(icp, OdometryFromAnchor(from, j));
+      if (Beyond(icp.T_ref_query.between(kept), 0.01, 0.005)) {
+        ++stats_.degenerate_kept;
+        icp.T_ref_query = kept;
+        CorrectNewestKeyframe(j, graph_.pose(j), graph_.pose(i) * kept);
+      }
+    }
     if (icp_ok) {
       edge.T_i_j = icp.T_ref_query;
       edge.information = GraphEdgeInformation(icp);
@@ -455,6 +463,18 @@ double RbpfSlam::OdometryChi2(const Anchor& from, int j, const fl::Pose2& T_i_j)
   const Eigen::Vector2d sigma = OdometrySigma(from, j, 1.0);
   const fl::Pose2 e = OdometryFromAnchor(from, j).between(T_i_j);
   return (e.x * e.x + e.y * e.y) / (sigma(0) * sigma(0)) + e.theta * e.theta / (sigma(1) * sigma(1));
+}
+
+fl::Pose2 RbpfSlam::OdometryAlongDegenerate(const IcpResult& icp,
+                                            const fl::Pose2& odom_rel) const {
+  // I − P projects a step onto H's unconstrained directions (scan_matcher.hpp).
+  const Eigen::Matrix3d P =
+      WellConstrainedProjector(icp.hessian, icp.length_m, opt_.icp.degeneracy_ratio);
+  const fl::Pose2& t = icp.T_ref_query;
+  const Eigen::Vector3d d(odom_rel.x - t.x, odom_rel.y - t.y,
+                          fl::WrapAngle(odom_rel.theta - t.theta));
+  const Eigen::Vector3d step = (Eigen::Matrix3d::Identity() - P) * d;
+  return fl::Pose2(t.x + step.x(), t.y + step.y(), fl::WrapAngle(t.theta + step.z()));
 }
 
 fl::Pose2 RbpfSlam::OdometryFromAnchor(const Anchor& from, int j) const {
@@ -685,6 +705,7 @@ std::vector<PointNormal> RbpfSlam::LoopSubmap(int cand, double path_length) cons
       PointNormal q;
       q.p = T_c_k * pn.p;
       q.n = R * pn.n;
+      q.n_wide = R * pn.n_wide;
       ref.push_back(q);
     }
   }

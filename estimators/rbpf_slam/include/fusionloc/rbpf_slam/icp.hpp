@@ -23,6 +23,15 @@
 // walls) get the std max_sigma_xy (max_sigma_xy / L in heading). Every eigenvalue of Σ is finally
 // capped at that value, so Ω = Σ⁻¹ is positive definite and says "unknown" along directions the
 // scene does not constrain instead of trusting the initial guess there.
+//
+// NOISY SENSORS: a reference normal fitted within normal_radius of a scan whose range noise is
+// comparable (the simulator's 10 cm in 0.3 m) follows the noise, often tens of degrees off the
+// wall, and H then claims centimetres along a featureless corridor's axis. Each reference point
+// also carries n_wide, fitted over a neighbourhood scaled to the scan's own noise
+// (ComputeNormals with IcpOptions); the pairs and the fit stay those of n, but H and M are
+// built with n_wide. The directions unconstrained with n_wide and constrained with n are
+// counted in noise_made_dims. For scans whose noise needs no wider fit (n_wide = n), nothing
+// changes.
 #pragma once
 
 #include <Eigen/Core>
@@ -35,6 +44,12 @@
 
 namespace fl::rbpf {
 
+// The scan's range noise [m], robustly: the median over consecutive triples of points (steps
+// at most max_step) of the range's second difference |p[k−1]| − 2|p[k]| + |p[k+1]| (about zero
+// on a smooth surface; 6σ² its variance from noise), divided by 0.6745·√6. Ranges are taken
+// from the points' frame origin (the laser, or a base close to it). 0 if fewer than 10 triples.
+double ScanRangeNoise(const std::vector<Eigen::Vector2d>& ordered_points, double max_step = 1.0);
+
 // Estimates normals of points ordered along a scan by a line fit (PCA) over the neighbours in
 // scan order within `radius` metres of the point, not crossing a gap between consecutive points
 // larger than `max_gap`; points with fewer than 3 points in the fit or whose scatter is not a
@@ -42,6 +57,14 @@ namespace fl::rbpf {
 std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& ordered_points,
                                         double radius = 0.3, double max_eigen_ratio = 0.3,
                                         double max_gap = 0.3);
+
+// The same with the fit adapted to the scan's own noise σ = ScanRangeNoise: radius
+// max(normal_radius, normal_radius_per_noise·σ), gap max(normal_max_gap,
+// normal_gap_per_noise·σ). A fit much narrower than the noise (10 cm noise in 0.3 m) returns
+// normals that follow the noise, up to 90° off the surface, and they add "information" along a
+// corridor's axis that the scene does not have.
+std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& ordered_points,
+                                        const IcpOptions& options);
 
 // Σ and Ω = Σ⁻¹ as documented above from H = Σ JᵀJ, M = Σ e² JᵀJ over n pairs and the
 // residual correlation ρ; `length_m` is the scale L of the heading (RMS point range). Returns
@@ -59,6 +82,9 @@ struct IcpResult {
   double sigma = 0.0;            // [m] σ̂, the per-pair residual std used in Σ
   double correlation = 0.0;      // [-] ρ, lag-1 correlation of the residuals
   int degenerate_dims = 0;       // directions of H with (almost) no information
+  int noise_made_dims = 0;       // of those, directions only the normals' noise constrained
+                                 // (the point's own normals do, the wide ones do not)
+  double length_m = 1.0;         // [m] L, the RMS query range: H's directions are in (x, y, L·θ)
   double rms = 0.0;              // [m] point-to-line RMS over the final pairs
   double inlier_fraction = 0.0;  // [-] paired query points / query points
   int pairs = 0;

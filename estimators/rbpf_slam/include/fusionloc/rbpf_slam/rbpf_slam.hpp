@@ -82,6 +82,8 @@ struct RbpfSlamStats {
   int64_t map_rebuilds = 0;             // corrections fed back to the filter
   int64_t map_rebuilds_continued = 0;   // ... that continued the previous rebuild's map
   int64_t divergences = 0;              // keyframes where ICP from odometry overruled the filter
+  int64_t degenerate_kept = 0;          // keyframes moved to the odometry's motion along a
+                                        // direction ICP could not see (degenerate_from_odometry)
   int64_t recoveries = 0;               // keyframes where the lost-track search moved the filter
   int64_t keyframe_reuses = 0;          // keyframes due where an existing one was reused (revisit)
   int64_t reuse_rejections = 0;         // ... where the nearby one did not verify (a new one came)
@@ -201,6 +203,9 @@ class RbpfSlam {
   bool ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, ScanResult* result);
   // The odometry's relative pose from anchor `from`'s keyframe to keyframe j.
   fl::Pose2 OdometryFromAnchor(const Anchor& from, int j) const;
+  // ICP's relative pose with its components along the unconstrained directions of its Hessian
+  // (icp.degeneracy_ratio) replaced by odom_rel's (graph.degenerate_from_odometry).
+  fl::Pose2 OdometryAlongDegenerate(const IcpResult& icp, const fl::Pose2& odom_rel) const;
   // The motion model's std (σ_xy [m], σ_θ [rad]) for the odometry's motion from anchor `from`
   // to keyframe j, times `scale`, at least graph.filter_edge_min_sigma_*.
   Eigen::Vector2d OdometrySigma(const Anchor& from, int j, double scale) const;

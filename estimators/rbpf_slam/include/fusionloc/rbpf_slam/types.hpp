@@ -22,6 +22,8 @@ struct LaserScan {
 struct PointNormal {
   Eigen::Vector2d p = Eigen::Vector2d::Zero();
   Eigen::Vector2d n = Eigen::Vector2d::Zero();
+  Eigen::Vector2d n_wide = Eigen::Vector2d::Zero();  // the normal of a fit as wide as the scan's
+                                                    // noise needs (icp.hpp); zero: n
 };
 
 // A relative-pose measurement between two keyframes, in the robot BASE frame:
