@@ -96,19 +96,28 @@ class LaserWorld {
   std::vector<Segment> segments_;
 };
 
+// The finite returns of a scan of `beams` beams evenly over `fov` rad, centred ahead, from
+// `pose`, as points in the laser frame; range noise `noise` [m] drawn from rng.
+inline std::vector<Eigen::Vector2d> FanPoints(const LaserWorld& world, const fl::Pose2& pose,
+                                              int beams, double fov, double max_range,
+                                              double noise, std::mt19937* rng) {
+  const double step = fov / (beams - 1);
+  const auto r = world.Scan(pose, beams, -fov / 2, step, max_range, noise, rng);
+  std::vector<Eigen::Vector2d> pts;
+  for (int k = 0; k < beams; ++k) {
+    if (!std::isfinite(r[k])) continue;
+    const double a = -fov / 2 + k * step;
+    pts.emplace_back(r[k] * std::cos(a), r[k] * std::sin(a));
+  }
+  return pts;
+}
+
 // The finite returns of a 361-beam, 180° scan (0.5° steps, first beam at the right) from `pose`,
 // as points in the laser frame; range noise `noise` [m] drawn with `seed`.
 inline std::vector<Eigen::Vector2d> ScanPoints(const LaserWorld& world, const fl::Pose2& pose,
                                                double noise, unsigned seed) {
   std::mt19937 rng(seed);
-  const auto r = world.Scan(pose, 361, -M_PI / 2, M_PI / 360, 25.0, noise, &rng);
-  std::vector<Eigen::Vector2d> pts;
-  for (int k = 0; k < 361; ++k) {
-    if (!std::isfinite(r[k])) continue;
-    const double a = -M_PI / 2 + k * M_PI / 360;
-    pts.emplace_back(r[k] * std::cos(a), r[k] * std::sin(a));
-  }
-  return pts;
+  return FanPoints(world, pose, 361, M_PI, 25.0, noise, &rng);
 }
 
 struct LoopRunOptions {

@@ -69,16 +69,8 @@ Chi2Trials RunChi2Trials(const test::LaserWorld& world, const std::vector<fl::Po
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::normal_distribution<double> n01(0.0, 1.0);
   Chi2Trials out;
-  const double step = fov / (beams - 1);
   auto points = [&](const fl::Pose2& pose) {
-    const auto r = world.Scan(pose, beams, -fov / 2, step, max_range, noise, &rng);
-    std::vector<Eigen::Vector2d> pts;
-    for (int k = 0; k < beams; ++k) {
-      if (!std::isfinite(r[k])) continue;
-      const double a = -fov / 2 + k * step;
-      pts.emplace_back(r[k] * std::cos(a), r[k] * std::sin(a));
-    }
-    return pts;
+    return test::FanPoints(world, pose, beams, fov, max_range, noise, &rng);
   };
   for (int t = 0; t < trials; ++t) {
     const fl::Pose2 pose_i =
@@ -185,14 +177,7 @@ TEST(IcpCovariance, IsLargeAlongACorridorAxis) {
 // `noise` drawn from rng.
 std::vector<Eigen::Vector2d> UrgPoints(const test::LaserWorld& world, const fl::Pose2& pose,
                                        double noise, std::mt19937* rng) {
-  const double fov = 240.0 * M_PI / 180.0, step = fov / 681;
-  const auto r = world.Scan(pose, 682, -fov / 2, step, 10.0, noise, rng);
-  std::vector<Eigen::Vector2d> pts;
-  for (int k = 0; k < 682; ++k) {
-    if (!std::isfinite(r[k])) continue;
-    pts.emplace_back(r[k] * std::cos(-fov / 2 + k * step), r[k] * std::sin(-fov / 2 + k * step));
-  }
-  return pts;
+  return test::FanPoints(world, pose, 682, 240.0 * M_PI / 180.0, 10.0, noise, rng);
 }
 
 TEST(Icp, ScanRangeNoiseMeasuresTheSensorsNoise) {

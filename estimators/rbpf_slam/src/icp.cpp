@@ -63,44 +63,39 @@ bool FitNormal(const std::vector<Eigen::Vector2d>& pts, int i, double radius,
   *normal = es.eigenvectors().col(0).normalized();
   return true;
 }
-}  // namespace
 
-std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts, double radius,
-                                        double max_eigen_ratio, double max_gap) {
+// Normals within (radius, max_gap) and, where wider, n_wide within (wide_radius, wide_gap).
+std::vector<PointNormal> NormalsWithin(const std::vector<Eigen::Vector2d>& pts, double radius,
+                                       double max_gap, double max_eigen_ratio, double wide_radius,
+                                       double wide_gap) {
+  const bool wider = wide_radius > radius || wide_gap > max_gap;
   std::vector<PointNormal> out;
   out.reserve(pts.size());
   for (int i = 0; i < static_cast<int>(pts.size()); ++i) {
     PointNormal pn;
     if (!FitNormal(pts, i, radius, max_eigen_ratio, max_gap, &pn.n)) continue;
     pn.p = pts[i];
-    pn.n_wide = pn.n;
-    out.push_back(pn);
-  }
-  return out;
-}
-
-std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts,
-                                        const IcpOptions& o) {
-  const double noise = ScanRangeNoise(pts);
-  const double wide_radius = std::max(o.normal_radius, o.normal_radius_per_noise * noise);
-  const double wide_gap = std::max(o.normal_max_gap, o.normal_gap_per_noise * noise);
-  const bool wider = wide_radius > o.normal_radius || wide_gap > o.normal_max_gap;
-  std::vector<PointNormal> out;
-  out.reserve(pts.size());
-  for (int i = 0; i < static_cast<int>(pts.size()); ++i) {
-    PointNormal pn;
-    if (!FitNormal(pts, i, o.normal_radius, o.normal_max_eigen_ratio, o.normal_max_gap, &pn.n)) {
-      continue;
-    }
-    pn.p = pts[i];
     // Where the wide fit is no line (a corner, clutter), the point's own normal stands.
-    if (!wider ||
-        !FitNormal(pts, i, wide_radius, o.normal_max_eigen_ratio, wide_gap, &pn.n_wide)) {
+    if (!wider || !FitNormal(pts, i, wide_radius, max_eigen_ratio, wide_gap, &pn.n_wide)) {
       pn.n_wide = pn.n;
     }
     out.push_back(pn);
   }
   return out;
+}
+}  // namespace
+
+std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts, double radius,
+                                        double max_eigen_ratio, double max_gap) {
+  return NormalsWithin(pts, radius, max_gap, max_eigen_ratio, radius, max_gap);
+}
+
+std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts,
+                                        const IcpOptions& o) {
+  const double noise = ScanRangeNoise(pts);
+  return NormalsWithin(pts, o.normal_radius, o.normal_max_gap, o.normal_max_eigen_ratio,
+                       std::max(o.normal_radius, o.normal_radius_per_noise * noise),
+                       std::max(o.normal_max_gap, o.normal_gap_per_noise * noise));
 }
 
 int IcpCovariance(const Eigen::Matrix3d& H, const Eigen::Matrix3d& M, int n, double correlation,
@@ -234,7 +229,6 @@ class PointHash {
   std::vector<int> slots_;          // open addressing (load <= 1/2): cell index or -1
   int shift_ = 60;
 };
-
 }  // namespace
 
 IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
@@ -330,9 +324,9 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
       const Eigen::Vector3d J = PoseJacobian(nj, q, c, s);
       Hs.noalias() += J * J.transpose();
       M.noalias() += (e * e) * J * J.transpose();
-      const Eigen::Vector2d& nw =
-          reference[j].n_wide.squaredNorm() > 0.0 ? reference[j].n_wide : nj;
-      const Eigen::Vector3d Jw = PoseJacobian(nw, q, c, s);
+      const Eigen::Vector2d& nw = reference[j].n_wide;
+      const Eigen::Vector3d Jw =
+          (nw == nj || nw.squaredNorm() == 0.0) ? J : PoseJacobian(nw, q, c, s);
       Hw.noalias() += Jw * Jw.transpose();
       Mw.noalias() += (e * e) * Jw * Jw.transpose();
       e2 += e * e;
