@@ -56,6 +56,31 @@ TEST(StereoVoLaserDepthTest, ProjectedPointLandsOnItsPixel) {
   EXPECT_NEAR(map.point(0).z(), 7.5, 1e-5);
 }
 
+// The same points given in a laser frame (x forward, z up, 0.3 m above and 0.2 m behind the
+// camera) with T_camera_laser: the map moves them into the camera frame itself.
+TEST(StereoVoLaserDepthTest, PointsInTheLaserFrameLandOnTheirPixelThroughTheExtrinsic) {
+  const StereoCamera cam = Camera();
+  Eigen::Isometry3d T_camera_laser = Eigen::Isometry3d::Identity();
+  T_camera_laser.linear() << 0, -1, 0,  //
+      0, 0, -1,                          //
+      1, 0, 0;
+  T_camera_laser.translation() = Eigen::Vector3d(0.05, -0.3, -0.2);
+  const Eigen::Vector3d ray((123.0 - cam.cx) / cam.fx, (45.0 - cam.cy) / cam.fy, 1.0);
+  const Eigen::Vector3d p_camera = 7.5 * ray;
+  const std::vector<Eigen::Vector3f> pts = {
+      (T_camera_laser.inverse() * p_camera).cast<float>(),  // at pixel (123, 45)
+      Eigen::Vector3f(-5.f, 0.f, 0.f)};                     // behind the camera
+  LaserDepthOptions o;
+  o.min_points_in_view = 1;
+  const LaserDepthMap map(o, cam, 640, 480, pts, T_camera_laser);
+  ASSERT_EQ(map.points_in_view(), 1);
+  EXPECT_NEAR(map.pixel(0).x(), 123.0, 1e-3);
+  EXPECT_NEAR(map.pixel(0).y(), 45.0, 1e-3);
+  EXPECT_LT((map.point(0).cast<double>() - p_camera).norm(), 1e-5);
+  // Without the extrinsic the same points are not in view.
+  EXPECT_EQ(LaserDepthMap(o, cam, 640, 480, pts).points_in_view(), 0);
+}
+
 TEST(StereoVoLaserDepthTest, FeatureOnAPlaneGetsThePlanesDepth) {
   const StereoCamera cam = Camera();
   // A wall 12 m ahead, turned 30 deg about the vertical axis; 2 cm range noise.

@@ -308,9 +308,9 @@ TEST(StereoVoLcm, ProcessRunsTheLocalBundleAdjustment) {
   EXPECT_LT(StatusValue(run.last_status, "local_ba_rms_px"), 1.0);
 }
 
-// LASER_3D converted to the left camera frame through both mountings: a point on the optical
-// axis 5 m ahead, and a NaN point left out and counted.
-TEST(StereoVoLcm, LaserScanToCameraAppliesTheMountings) {
+// LASER_3D as the VO's cloud: the extrinsic from both mountings maps a point 5 m ahead on the
+// optical axis there; a NaN point is left out and counted.
+TEST(StereoVoLcm, LaserCloudFromScanCarriesTheMountings) {
   const StereoCalibration calib = fl::test::stereo::TestCalibration();
   Eigen::Isometry3d T_base_laser = Eigen::Isometry3d::Identity();
   T_base_laser.translation() = Eigen::Vector3d(0.1, 0.0, 0.3);
@@ -326,11 +326,12 @@ TEST(StereoVoLcm, LaserScanToCameraAppliesTheMountings) {
   scan.intensity = {0.5f, 0.5f};
   int64_t non_finite = 0;
   const LaserCloud cloud =
-      LaserScanToCamera(scan, calib.T_base_camera.inverse() * T_base_laser, &non_finite);
+      LaserCloudFromScan(scan, calib.T_base_camera.inverse() * T_base_laser, &non_finite);
   EXPECT_EQ(cloud.utime, 7);
   ASSERT_EQ(cloud.points.size(), 1u);
   EXPECT_EQ(non_finite, 1);
-  EXPECT_LT((cloud.points[0].cast<double>() - p_camera).norm(), 1e-5);
+  EXPECT_LT((cloud.points[0].cast<double>() - p_laser).norm(), 1e-5);
+  EXPECT_LT((cloud.T_camera_laser * cloud.points[0].cast<double>() - p_camera).norm(), 1e-5);
 }
 
 // fl-stereo-vo --laser-aided replaying a log: with LASER_3D and its mounting the frames use the

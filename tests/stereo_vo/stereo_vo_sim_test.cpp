@@ -273,7 +273,7 @@ TEST(StereoVoSim, TheSimulatorsMultiLineLaserGivesFeaturesTheirDepth) {
     if (!frame.stereo || !vo) continue;
     ASSERT_TRUE(scan && T_base_laser3d) << "the scan comes before the pair of its step";
     int64_t non_finite = 0;
-    const LaserCloud cloud = LaserScanToCamera(
+    const LaserCloud cloud = LaserCloudFromScan(
         *scan, vo->calibration().T_base_camera.inverse() * *T_base_laser3d, &non_finite);
     EXPECT_EQ(non_finite, 0);
     cv::Mat left, right;

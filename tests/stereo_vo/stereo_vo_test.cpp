@@ -145,7 +145,7 @@ TEST_F(StereoVoTest, LaserAidedModeUsesTheScanAndFallsBackOnBadInput) {
       expect = "0 of 0 points";
     } else if (k == 4) {  // left in a laser frame (x forward, y left, z up)
       for (auto& p : cloud.points) p = Eigen::Vector3f(p.z(), -p.x(), -p.y());
-      expect = "is it in the left camera frame";
+      expect = "is its extrinsic T_camera_laser right?";
     } else if (k == 5) {
       cloud.utime = t + 200000;
       expect = "0.2";

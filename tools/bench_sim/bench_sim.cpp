@@ -171,7 +171,7 @@ WorldResult RunWorld(const fl::sim::SimOptions& sim_options_in,
         const bool with_scan = laser_aided && scan_3d && T_base_laser3d;
         if (with_scan) {
           int64_t non_finite = 0;
-          cloud = fl::vo::LaserScanToCamera(
+          cloud = fl::vo::LaserCloudFromScan(
               *scan_3d, vo->calibration().T_base_camera.inverse() * *T_base_laser3d, &non_finite);
         }
         const fl::vo::StereoVoResult r =

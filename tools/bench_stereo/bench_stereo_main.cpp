@@ -145,8 +145,6 @@ RunOutput RunFolder(const std::string& folder, const fl::vo::StereoVoOptions& op
   // Velodyne -> left camera: the left camera is cam0 shifted by its optical centre.
   Eigen::Isometry3d T_left_velo = seq.T_cam0_velo;
   T_left_velo.pretranslate(-seq.calibration.left_center_in_cam0);
-  const Eigen::Matrix3f R_lv = T_left_velo.linear().cast<float>();
-  const Eigen::Vector3f t_lv = T_left_velo.translation().cast<float>();
   int laser_fallbacks = 0;
   double laser_depth_sum = 0;
   const fl::importers::ConvertSummary conv = fl::importers::ConvertKitti(kopts, folder, log_path);
@@ -194,14 +192,14 @@ RunOutput RunFolder(const std::string& folder, const fl::vo::StereoVoOptions& op
           scan = fl::importers::ReadVelodyneBin(seq.velodyne_scans[it->second]);
       }
       const double t0 = NowMs(), c0 = ThreadCpuMs();
-      fl::vo::LaserCloud cloud;  // the extrinsic is applied inside the timing
+      fl::vo::LaserCloud cloud;  // the VO applies the extrinsic, inside the timing
       if (laser) {
         cloud.utime = msg.utime;  // KITTI: the scan is synchronised with the camera trigger
-        cloud.points.reserve(scan.points.size());
-        for (const Eigen::Vector3f& p : scan.points) cloud.points.push_back(R_lv * p + t_lv);
+        cloud.points = std::move(scan.points);
+        cloud.T_camera_laser = T_left_velo;
       }
       const fl::vo::StereoVoResult r = vo->AddStereoFrame(
-          msg.utime, left, right, laser && !scan.points.empty() ? &cloud : nullptr);
+          msg.utime, left, right, laser && !cloud.points.empty() ? &cloud : nullptr);
       ms.push_back(NowMs() - t0);
       cpu_ms.push_back(ThreadCpuMs() - c0);
       if (laser) {

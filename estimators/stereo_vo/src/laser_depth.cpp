@@ -55,41 +55,45 @@ double StereoDepthSigma(const StereoCamera& camera, double depth_m, double dispa
 }
 
 LaserDepthMap::LaserDepthMap(const LaserDepthOptions& options, const StereoCamera& camera,
-                             int width, int height,
-                             const std::vector<Eigen::Vector3f>& points_camera)
+                             int width, int height, const std::vector<Eigen::Vector3f>& points,
+                             const Eigen::Isometry3d& T_camera_points)
     : options_(options), camera_(camera), width_(width), height_(height) {
   cell_px_ = options.search_radius_px;
   cols_ = std::max(1, static_cast<int>(std::ceil(width / cell_px_)));
   rows_ = std::max(1, static_cast<int>(std::ceil(height / cell_px_)));
-  std::vector<int> cell_of;
-  std::vector<Eigen::Vector2f> px;
-  cell_of.reserve(points_camera.size() / 2);
-  px.reserve(points_camera.size() / 2);
-  std::vector<int> kept;
-  kept.reserve(points_camera.size() / 2);
+  // One pass over the scan: into the camera frame, the depth gate, the projection. Only the
+  // points in view are stored (a fifth of a Velodyne scan), so nothing scan-sized is allocated.
+  struct Kept {
+    int cell;
+    Eigen::Vector2f pixel;
+    Eigen::Vector3f point;  // camera frame
+  };
+  std::vector<Kept> kept;
+  const Eigen::Matrix3f R = T_camera_points.linear().cast<float>();
+  const Eigen::Vector3f t = T_camera_points.translation().cast<float>();
   Eigen::Vector3d uvu;
-  for (size_t i = 0; i < points_camera.size(); ++i) {
-    const Eigen::Vector3d p = points_camera[i].cast<double>();
-    if (!(p.z() >= options.min_depth_m && p.z() <= options.max_depth_m)) continue;
-    if (!camera.Project(p, &uvu)) continue;
+  for (const Eigen::Vector3f& p_points : points) {
+    const Eigen::Vector3f p_camera = R * p_points + t;
+    const double z = p_camera.z();
+    if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
+    if (!camera.Project(p_camera.cast<double>(), &uvu)) continue;
     if (!(uvu(0) >= 0 && uvu(0) < width && uvu(1) >= 0 && uvu(1) < height)) continue;
     const int cx = std::min(cols_ - 1, static_cast<int>(uvu(0) / cell_px_));
     const int cy = std::min(rows_ - 1, static_cast<int>(uvu(1) / cell_px_));
-    cell_of.push_back(cy * cols_ + cx);
-    px.emplace_back(static_cast<float>(uvu(0)), static_cast<float>(uvu(1)));
-    kept.push_back(static_cast<int>(i));
+    kept.push_back({cy * cols_ + cx, {static_cast<float>(uvu(0)), static_cast<float>(uvu(1))},
+                    p_camera});
   }
   // Counting sort by cell.
   cell_start_.assign(static_cast<size_t>(cols_ * rows_ + 1), 0);
-  for (int c : cell_of) ++cell_start_[static_cast<size_t>(c + 1)];
+  for (const Kept& k : kept) ++cell_start_[static_cast<size_t>(k.cell + 1)];
   for (size_t c = 1; c < cell_start_.size(); ++c) cell_start_[c] += cell_start_[c - 1];
   std::vector<int> fill(cell_start_.begin(), cell_start_.end() - 1);
-  pixels_.resize(px.size());
-  points_.resize(px.size());
-  for (size_t k = 0; k < px.size(); ++k) {
-    const size_t at = static_cast<size_t>(fill[static_cast<size_t>(cell_of[k])]++);
-    pixels_[at] = px[k];
-    points_[at] = points_camera[static_cast<size_t>(kept[k])];
+  pixels_.resize(kept.size());
+  points_.resize(kept.size());
+  for (const Kept& k : kept) {
+    const size_t at = static_cast<size_t>(fill[static_cast<size_t>(k.cell)]++);
+    pixels_[at] = k.pixel;
+    points_[at] = k.point;
   }
 }
 

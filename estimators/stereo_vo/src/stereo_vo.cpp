@@ -312,7 +312,8 @@ void StereoVo::AttachLaser(const LaserCloud* laser, stages::StereoFrame* frame,
           std::to_string(options_.laser_max_time_offset_s) + ")";
   } else {
     auto map = std::make_shared<const LaserDepthMap>(
-        options_.laser_depth, camera_, calibration_.width, calibration_.height, laser->points);
+        options_.laser_depth, camera_, calibration_.width, calibration_.height, laser->points,
+        laser->T_camera_laser);
     result->stats.laser_points_in_view = map->points_in_view();
     if (map->usable()) {
       frame->laser = std::move(map);
@@ -321,7 +322,7 @@ void StereoVo::AttachLaser(const LaserCloud* laser, stages::StereoFrame* frame,
             std::to_string(laser->points.size()) + " points in front of the camera in the image (" +
             "laser_depth.min_points_in_view " +
             std::to_string(options_.laser_depth.min_points_in_view) +
-            "): is it in the left camera frame (extrinsic applied)?";
+            "): is its extrinsic T_camera_laser right?";
     }
   }
   if (!why.empty()) {

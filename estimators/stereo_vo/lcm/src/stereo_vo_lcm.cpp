@@ -126,22 +126,21 @@ fusionloc::point_cloud_t KeyframePointsToLcm(const StereoVoResult& result) {
   return m;
 }
 
-LaserCloud LaserScanToCamera(const fusionloc::laser_scan_3d_t& scan,
-                             const Eigen::Isometry3d& T_camera_laser, int64_t* non_finite) {
+LaserCloud LaserCloudFromScan(const fusionloc::laser_scan_3d_t& scan,
+                              const Eigen::Isometry3d& T_camera_laser, int64_t* non_finite) {
   LaserCloud cloud;
   cloud.utime = scan.utime;
+  cloud.T_camera_laser = T_camera_laser;
   const size_t n = std::min({static_cast<size_t>(std::max(scan.num_points, 0)), scan.x.size(),
                              scan.y.size(), scan.z.size()});
   cloud.points.reserve(n);
-  const Eigen::Matrix3f R = T_camera_laser.linear().cast<float>();
-  const Eigen::Vector3f t = T_camera_laser.translation().cast<float>();
   for (size_t i = 0; i < n; ++i) {
     const Eigen::Vector3f p(scan.x[i], scan.y[i], scan.z[i]);
     if (!p.allFinite()) {
       if (non_finite) ++*non_finite;
       continue;
     }
-    cloud.points.push_back(R * p + t);
+    cloud.points.push_back(p);
   }
   return cloud;
 }
@@ -279,7 +278,7 @@ const LaserCloud* StereoVoNode::LaserFor(Utime utime, std::string* why) {
   }
   const Eigen::Isometry3d T_camera_laser =
       active_calibration_.T_base_camera.inverse() * *T_base_laser_;
-  laser_cloud_ = LaserScanToCamera(*best, T_camera_laser, &laser_points_non_finite_);
+  laser_cloud_ = LaserCloudFromScan(*best, T_camera_laser, &laser_points_non_finite_);
   return &laser_cloud_;
 }
 

@@ -109,10 +109,12 @@ double StereoDepthSigma(const StereoCamera& camera, double depth_m, double dispa
 // The projected laser points of one scan, indexed by pixel.
 class LaserDepthMap {
  public:
-  // points_camera: laser points in the left camera frame [m]; those with z in
-  // [min_depth_m, max_depth_m] that project inside the width x height image are kept.
+  // points: laser points [m], mapped into the left camera frame by T_camera_points
+  // (p_camera = R p + t, in float); those with z in [min_depth_m, max_depth_m] that project
+  // inside the width x height image are kept.
   LaserDepthMap(const LaserDepthOptions& options, const StereoCamera& camera, int width, int height,
-                const std::vector<Eigen::Vector3f>& points_camera);
+                const std::vector<Eigen::Vector3f>& points,
+                const Eigen::Isometry3d& T_camera_points = Eigen::Isometry3d::Identity());
 
   int points_in_view() const { return static_cast<int>(pixels_.size()); }
   bool usable() const { return points_in_view() >= options_.min_points_in_view; }

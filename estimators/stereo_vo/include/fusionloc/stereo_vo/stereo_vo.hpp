@@ -192,11 +192,14 @@ struct FrameStats {
   double ms_ba = 0;
 };
 
-// A laser scan for the laser-aided mode: points already in the LEFT camera frame (the caller
-// applies the extrinsic T_camera_laser), taken at `utime`.
+// A laser scan for the laser-aided mode, taken at `utime`: its points as the laser measured them
+// and the extrinsic that maps them into the LEFT camera optical frame. The VO applies it while it
+// projects the scan (one pass; a Velodyne scan has ~120k points, of which ~20k fall in the image).
 struct LaserCloud {
   Utime utime = 0;
-  std::vector<Eigen::Vector3f> points;  // [m] left camera optical frame
+  std::vector<Eigen::Vector3f> points;  // [m] laser frame (the frame T_camera_laser maps from)
+  // p_camera = T_camera_laser p_laser; identity when the points are already in the camera frame.
+  Eigen::Isometry3d T_camera_laser = Eigen::Isometry3d::Identity();
 };
 
 struct StereoVoResult {

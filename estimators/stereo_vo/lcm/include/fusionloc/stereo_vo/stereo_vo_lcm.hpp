@@ -46,10 +46,11 @@ bot_core::pose_t PoseToLcm(Utime utime, const Eigen::Isometry3d& T_world_base);
 fusionloc::relative_pose_factor_t FactorToLcm(const KeyframeFactor& factor);
 fusionloc::point_cloud_t KeyframePointsToLcm(const StereoVoResult& result);
 
-// A LASER_3D scan in the left camera frame for the laser-aided mode: p_camera = T_camera_laser
-// p_laser for each finite point; `non_finite` counts the points left out.
-LaserCloud LaserScanToCamera(const fusionloc::laser_scan_3d_t& scan,
-                             const Eigen::Isometry3d& T_camera_laser, int64_t* non_finite);
+// A LASER_3D scan for the laser-aided mode: its finite points (laser frame) and the extrinsic
+// T_camera_laser the VO maps them into the left camera frame with; `non_finite` counts the
+// points left out.
+LaserCloud LaserCloudFromScan(const fusionloc::laser_scan_3d_t& scan,
+                              const Eigen::Isometry3d& T_camera_laser, int64_t* non_finite);
 
 // Same image size, intrinsics, baseline, rectification and mounting (to 1e-9): the periodic
 // repeats of STEREO_CALIBRATION do not restart the VO.
