@@ -280,8 +280,9 @@ class WindowBa {
       blocks.clear();
       for (const Term& term : point.terms) {
         const Eigen::Isometry3d& T_o_k = T[term.k];
-        const Eigen::Matrix3d Rt = T_o_k.linear().transpose();
-        const Eigen::Vector3d q = term.k == 0 ? p_o : Eigen::Vector3d(Rt * (p_o - T_o_k.translation()));
+        const Eigen::Matrix3d& R = T_o_k.linear();
+        const Eigen::Vector3d q =
+            term.k == 0 ? p_o : Eigen::Vector3d(R.transpose() * (p_o - T_o_k.translation()));
         Eigen::Vector3d r;
         Eigen::Matrix3d Jq;  // d r / d q
         if (term.laser) {
@@ -292,17 +293,32 @@ class WindowBa {
           Jq = ba::StereoProjectionJacobian(camera_, q);
         }
         const double w = robust ? huber_.Weight(r.squaredNorm()) : 1.0;
-        const Eigen::Matrix3d Jp = term.k == 0 ? Jq : Eigen::Matrix3d(Jq * Rt);
-        Hpp.noalias() += w * Jp.transpose() * Jp;
-        gp.noalias() += w * Jp.transpose() * r;
-        if (term.k == 0) continue;
-        Mat36 Jc;
-        Jc.leftCols<3>() = -Jq;
-        Jc.rightCols<3>() = Jq * ba::Skew(q);
+        // With A = w Jq^T Jq, b = w Jq^T r, Qx = [q]x, Jp = Jq R^T and Jc = Jq [-I, Qx] (the
+        // header's Jacobians), every block follows from the 3x3 A:
+        //   w Jp^T Jp = R A R^T,  w Jp^T r = R b,  w Jc^T r = [-b; Qx^T b],
+        //   w Jc^T Jc = [A, -A Qx; -(A Qx)^T, Qx^T A Qx],  H_pc = w Jp^T Jc = [-R A, R A Qx].
+        const Eigen::Matrix3d A = w * Jq.transpose() * Jq;
+        const Eigen::Vector3d b = w * Jq.transpose() * r;
+        if (term.k == 0) {
+          Hpp += A;
+          gp += b;
+          continue;
+        }
+        const Eigen::Matrix3d RA = R * A;
+        Hpp.noalias() += RA * R.transpose();
+        gp.noalias() += R * b;
+        const Eigen::Matrix3d Qx = ba::Skew(q);
+        const Eigen::Matrix3d AQ = A * Qx;
         const int a = 6 * (term.k - 1);
-        S->block<6, 6>(a, a).noalias() += w * Jc.transpose() * Jc;
-        g->segment<6>(a).noalias() += w * Jc.transpose() * r;
-        const Mat36 Hpc = w * Jp.transpose() * Jc;
+        S->block<3, 3>(a, a) += A;
+        S->block<3, 3>(a, a + 3) -= AQ;
+        S->block<3, 3>(a + 3, a) -= AQ.transpose();
+        S->block<3, 3>(a + 3, a + 3).noalias() += Qx.transpose() * AQ;
+        g->segment<3>(a) -= b;
+        g->segment<3>(a + 3).noalias() += Qx.transpose() * b;
+        Mat36 Hpc;
+        Hpc.leftCols<3>() = -RA;
+        Hpc.rightCols<3>().noalias() = R * AQ;
         if (!blocks.empty() && blocks.back().first == term.k) {
           blocks.back().second += Hpc;  // the laser term of the same observation
         } else {
