@@ -146,6 +146,29 @@ TEST(StereoVoLocalBa, ReducesTheErrorOfAPerturbedWindow) {
   }
 }
 
+// function_tolerance ends the solves early (fewer steps than with none), and where they end is
+// the converged window to far below its noise: poses within 1 mm and 0.005 deg.
+TEST(StereoVoLocalBa, TheFunctionToleranceStopsAtTheConvergedWindow) {
+  const StereoCamera cam = Cam();
+  for (uint32_t seed : {1u, 2u, 3u}) {
+    std::vector<Eigen::Isometry3d> truth;
+    std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 6, 300, 1.0, 0.04, 0.3, seed, &truth);
+    Perturb(&window, 0.05, 0.5, seed + 200);
+    LocalBaOptions converged;
+    converged.function_tolerance = 0;
+    converged.max_iterations = 30;
+    const LocalBaResult full = LocalBundleAdjustment(cam, window, converged, 0.3);
+    const LocalBaResult early = LocalBundleAdjustment(cam, window, LocalBaOptions(), 0.3);
+    ASSERT_TRUE(full.ok && early.ok) << full.message << early.message;
+    EXPECT_LT(early.iterations, full.iterations) << "seed " << seed;
+    for (size_t k = 1; k < window.size(); ++k) {
+      EXPECT_LT(TransError(early.T_world_camera[k], full.T_world_camera[k]), 1e-3)
+          << "seed " << seed << ", keyframe " << k;
+      EXPECT_LT(RotErrorDeg(early.T_world_camera[k], full.T_world_camera[k]), 5e-3);
+    }
+  }
+}
+
 TEST(StereoVoLocalBa, DropsOutlierObservations) {
   const StereoCamera cam = Cam();
   std::vector<Eigen::Isometry3d> truth;
@@ -298,6 +321,7 @@ TEST(StereoVoLocalBa, TheAnalyticSolverAgreesWithTheCeresReference) {
     LocalBaOptions options;
     options.laser_points = true;
     options.max_iterations = 30;
+    options.function_tolerance = 1e-10;  // both solvers to convergence
     const LocalBaResult analytic = LocalBundleAdjustment(cam, window, options, 0.5);
     options.use_ceres = true;
     const LocalBaResult reference = LocalBundleAdjustment(cam, window, options, 0.5);
@@ -348,6 +372,11 @@ TEST(StereoVoLocalBa, OptionsValidate) {
   EXPECT_FALSE(o.Validate().ok());
   o = LocalBaOptions();
   o.motion_prior_covariance_scale = 0;
+  EXPECT_FALSE(o.Validate().ok());
+  o = LocalBaOptions();
+  o.function_tolerance = 1;
+  EXPECT_FALSE(o.Validate().ok());
+  o.function_tolerance = -1e-3;
   EXPECT_FALSE(o.Validate().ok());
 }
 

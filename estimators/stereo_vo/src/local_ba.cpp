@@ -140,6 +140,8 @@ void Relinearise(BaState* state) {
 // RMS of the reprojection residual components over the kept observations [px].
 double RmsPx(const StereoCamera& camera, const std::vector<BaTrack>& tracks,
              const std::vector<std::vector<bool>>& keep, const BaState& state) {
+  std::vector<Eigen::Isometry3d> T_k_o(state.T0_o_k.size());
+  for (size_t k = 0; k < T_k_o.size(); ++k) T_k_o[k] = CurrentPose(state, k).inverse();
   double sum = 0;
   int n = 0;
   for (size_t t = 0; t < tracks.size(); ++t) {
@@ -149,7 +151,7 @@ double RmsPx(const StereoCamera& camera, const std::vector<BaTrack>& tracks,
       const auto& [k, obs] = tracks[t].observations[m];
       const Eigen::Vector3d& uvu = obs.uvu;
       Eigen::Vector3d predicted;
-      if (!camera.Project(CurrentPose(state, k).inverse() * p_o, &predicted)) continue;
+      if (!camera.Project(T_k_o[static_cast<size_t>(k)] * p_o, &predicted)) continue;
       sum += (predicted - uvu).squaredNorm();
       n += 3;
     }
@@ -167,6 +169,7 @@ bool Solve(const LocalBaOptions& options, ceres::Problem* problem, int* iteratio
   ceres::Solver::Options solver;
   solver.linear_solver_type = options.sparse_schur ? ceres::SPARSE_SCHUR : ceres::DENSE_SCHUR;
   solver.max_num_iterations = options.max_iterations;
+  solver.function_tolerance = options.function_tolerance;
   solver.num_threads = 1;
   solver.logging_type = ceres::SILENT;
   solver.minimizer_progress_to_stdout = false;
@@ -272,80 +275,10 @@ class WindowBa {
     constrained->assign(n_, false);
     (*constrained)[0] = true;  // the gauge
     for (size_t i = 0; i < points_.size(); ++i) {
-      const Point& point = points_[i];
-      const Eigen::Vector3d p_o(p[point.track][0], p[point.track][1], p[point.track][2]);
-      Eigen::Matrix3d Hpp = Eigen::Matrix3d::Zero();
-      Eigen::Vector3d gp = Eigen::Vector3d::Zero();
-      auto& blocks = blocks_[i];
-      blocks.clear();
-      for (const Term& term : point.terms) {
-        const Eigen::Isometry3d& T_o_k = T[term.k];
-        const Eigen::Matrix3d& R = T_o_k.linear();
-        const Eigen::Vector3d q =
-            term.k == 0 ? p_o : Eigen::Vector3d(R.transpose() * (p_o - T_o_k.translation()));
-        Eigen::Vector3d r;
-        Eigen::Matrix3d Jq;  // d r / d q
-        if (term.laser) {
-          r = term.sW * (q - term.z);
-          Jq = term.sW;
-        } else {
-          if (!ba::StereoResidual(camera_, q, term.z, &r)) return false;
-          Jq = ba::StereoProjectionJacobian(camera_, q);
-        }
-        const double w = robust ? huber_.Weight(r.squaredNorm()) : 1.0;
-        // With A = w Jq^T Jq, b = w Jq^T r, Qx = [q]x, Jp = Jq R^T and Jc = Jq [-I, Qx] (the
-        // header's Jacobians), every block follows from the 3x3 A:
-        //   w Jp^T Jp = R A R^T,  w Jp^T r = R b,  w Jc^T r = [-b; Qx^T b],
-        //   w Jc^T Jc = [A, -A Qx; -(A Qx)^T, Qx^T A Qx],  H_pc = w Jp^T Jc = [-R A, R A Qx].
-        const Eigen::Matrix3d A = w * Jq.transpose() * Jq;
-        const Eigen::Vector3d b = w * Jq.transpose() * r;
-        if (term.k == 0) {
-          Hpp += A;
-          gp += b;
-          continue;
-        }
-        const Eigen::Matrix3d RA = R * A;
-        Hpp.noalias() += RA * R.transpose();
-        gp.noalias() += R * b;
-        const Eigen::Matrix3d Qx = ba::Skew(q);
-        const Eigen::Matrix3d AQ = A * Qx;
-        const int a = 6 * (term.k - 1);
-        S->block<3, 3>(a, a) += A;
-        S->block<3, 3>(a, a + 3) -= AQ;
-        S->block<3, 3>(a + 3, a) -= AQ.transpose();
-        S->block<3, 3>(a + 3, a + 3).noalias() += Qx.transpose() * AQ;
-        g->segment<3>(a) -= b;
-        g->segment<3>(a + 3).noalias() += Qx.transpose() * b;
-        Mat36 Hpc;
-        Hpc.leftCols<3>() = -RA;
-        Hpc.rightCols<3>().noalias() = R * AQ;
-        if (!blocks.empty() && blocks.back().first == term.k) {
-          blocks.back().second += Hpc;  // the laser term of the same observation
-        } else {
-          blocks.emplace_back(term.k, Hpc);
-        }
-        (*constrained)[term.k] = true;
-      }
+      Eigen::Matrix3d Hpp;
+      if (!LinearisePoint(i, T, p, robust, S, g, &Hpp, constrained)) return false;
       if (lambda > 0) Hpp.diagonal() *= (1.0 + lambda);
-      const Eigen::LDLT<Eigen::Matrix3d> ldlt(Hpp);
-      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
-      Hinv_[i] = ldlt.solve(Eigen::Matrix3d::Identity());
-      gp_[i] = gp;
-      const Eigen::Vector3d Hinv_gp = Hinv_[i] * gp;
-      for (size_t x = 0; x < blocks.size(); ++x) {
-        const auto& [ka, Ba] = blocks[x];
-        const int a = 6 * (ka - 1);
-        const Eigen::Matrix<double, 6, 3> BaT_Hinv = Ba.transpose() * Hinv_[i];
-        g->segment<6>(a).noalias() -= Ba.transpose() * Hinv_gp;
-        // S is symmetric: the blocks on and above the diagonal, mirrored.
-        for (size_t y = x; y < blocks.size(); ++y) {
-          const auto& [kb, Bb] = blocks[y];
-          const int b = 6 * (kb - 1);
-          const Matrix6d X = BaT_Hinv * Bb;
-          S->block<6, 6>(a, b) -= X;
-          if (b != a) S->block<6, 6>(b, a) -= X.transpose();
-        }
-      }
+      if (!EliminatePoint(i, Hpp, S, g)) return false;
     }
     for (const Prior& prior : priors_) {
       Vector6 r6;
@@ -367,6 +300,97 @@ class WindowBa {
       S->block<6, 6>(6 * (k - 1), 6 * (k - 1)).setIdentity();
     }
     if (lambda > 0) S->diagonal() *= (1.0 + lambda);
+    return true;
+  }
+
+  // Point i's terms at (T, p): its block H_pp (undamped), g_p, and its pose blocks H_pc
+  // (blocks_[i]) and their contributions to the pose system's diagonal blocks and gradient.
+  bool LinearisePoint(size_t i, const std::vector<Eigen::Isometry3d>& T,
+                      const std::vector<PointXyz>& p, bool robust, Eigen::MatrixXd* S,
+                      Eigen::VectorXd* g, Eigen::Matrix3d* Hpp_out,
+                      std::vector<bool>* constrained) {
+    const Point& point = points_[i];
+    const Eigen::Vector3d p_o(p[point.track][0], p[point.track][1], p[point.track][2]);
+    Eigen::Matrix3d Hpp = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d gp = Eigen::Vector3d::Zero();
+    auto& blocks = blocks_[i];
+    blocks.clear();
+    for (const Term& term : point.terms) {
+      const Eigen::Isometry3d& T_o_k = T[term.k];
+      const Eigen::Matrix3d& R = T_o_k.linear();
+      const Eigen::Vector3d q =
+          term.k == 0 ? p_o : Eigen::Vector3d(R.transpose() * (p_o - T_o_k.translation()));
+      Eigen::Vector3d r;
+      Eigen::Matrix3d Jq;  // d r / d q
+      if (term.laser) {
+        r = term.sW * (q - term.z);
+        Jq = term.sW;
+      } else {
+        if (!ba::StereoResidual(camera_, q, term.z, &r)) return false;
+        Jq = ba::StereoProjectionJacobian(camera_, q);
+      }
+      const double w = robust ? huber_.Weight(r.squaredNorm()) : 1.0;
+      // With A = w Jq^T Jq, b = w Jq^T r, Qx = [q]x, Jp = Jq R^T and Jc = Jq [-I, Qx] (the
+      // header's Jacobians), every block follows from the 3x3 A:
+      //   w Jp^T Jp = R A R^T,  w Jp^T r = R b,  w Jc^T r = [-b; Qx^T b],
+      //   w Jc^T Jc = [A, -A Qx; -(A Qx)^T, Qx^T A Qx],  H_pc = w Jp^T Jc = [-R A, R A Qx].
+      const Eigen::Matrix3d A = w * Jq.transpose() * Jq;
+      const Eigen::Vector3d b = w * Jq.transpose() * r;
+      if (term.k == 0) {
+        Hpp += A;
+        gp += b;
+        continue;
+      }
+      const Eigen::Matrix3d RA = R * A;
+      Hpp.noalias() += RA * R.transpose();
+      gp.noalias() += R * b;
+      const Eigen::Matrix3d Qx = ba::Skew(q);
+      const Eigen::Matrix3d AQ = A * Qx;
+      const int a = 6 * (term.k - 1);
+      S->block<3, 3>(a, a) += A;
+      S->block<3, 3>(a, a + 3) -= AQ;
+      S->block<3, 3>(a + 3, a) -= AQ.transpose();
+      S->block<3, 3>(a + 3, a + 3).noalias() += Qx.transpose() * AQ;
+      g->segment<3>(a) -= b;
+      g->segment<3>(a + 3).noalias() += Qx.transpose() * b;
+      Mat36 Hpc;
+      Hpc.leftCols<3>() = -RA;
+      Hpc.rightCols<3>().noalias() = R * AQ;
+      if (!blocks.empty() && blocks.back().first == term.k) {
+        blocks.back().second += Hpc;  // the laser term of the same observation
+      } else {
+        blocks.emplace_back(term.k, Hpc);
+      }
+      (*constrained)[term.k] = true;
+    }
+    *Hpp_out = Hpp;
+    gp_[i] = gp;
+    return true;
+  }
+
+  // Eliminates point i from the pose system with its (damped) block Hpp:
+  // S -= H_cp H_pp^-1 H_pc, g -= H_cp H_pp^-1 g_p. false if Hpp is not positive definite.
+  bool EliminatePoint(size_t i, const Eigen::Matrix3d& Hpp, Eigen::MatrixXd* S,
+                      Eigen::VectorXd* g) {
+    const auto& blocks = blocks_[i];
+    const Eigen::LDLT<Eigen::Matrix3d> ldlt(Hpp);
+    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) return false;
+    Hinv_[i] = ldlt.solve(Eigen::Matrix3d::Identity());
+    const Eigen::Vector3d Hinv_gp = Hinv_[i] * gp_[i];
+    for (size_t x = 0; x < blocks.size(); ++x) {
+      const auto& [ka, Ba] = blocks[x];
+      const int a = 6 * (ka - 1);
+      const Eigen::Matrix<double, 6, 3> BaT_Hinv = Ba.transpose() * Hinv_[i];
+      g->segment<6>(a).noalias() -= Ba.transpose() * Hinv_gp;
+      // S is symmetric: the blocks on and above the diagonal, mirrored.
+      for (size_t y = x; y < blocks.size(); ++y) {
+        const auto& [kb, Bb] = blocks[y];
+        const int b = 6 * (kb - 1);
+        const Matrix6d X = BaT_Hinv * Bb;
+        S->block<6, 6>(a, b) -= X;
+        if (b != a) S->block<6, 6>(b, a) -= X.transpose();
+      }
+    }
     return true;
   }
 
@@ -474,7 +498,7 @@ bool SolveAnalytic(const LocalBaOptions& options, WindowBa* ba, BaState* state, 
       state->point.swap(p_trial);
       cost = new_cost;
       lambda = std::max(1e-9, lambda / 5.0);
-      if (decrease < 1e-7 || dy.norm() < 1e-10) break;
+      if (decrease < options.function_tolerance || dy.norm() < 1e-10) break;
     } else {
       lambda *= 10.0;
       if (lambda > 1e6) break;
@@ -524,6 +548,9 @@ fl::Status LocalBaOptions::Validate() const {
     return fl::Status::Error("local_ba.min_track_keyframes must be in [2, window_keyframes]");
   }
   if (max_iterations < 1) return fl::Status::Error("local_ba.max_iterations must be >= 1");
+  if (!(function_tolerance >= 0 && function_tolerance < 1)) {
+    return fl::Status::Error("local_ba.function_tolerance must be in [0, 1)");
+  }
   if (!(huber_px > 0 && outlier_threshold_px > 0)) {
     return fl::Status::Error("local_ba.huber_px and local_ba.outlier_threshold_px must be > 0");
   }
