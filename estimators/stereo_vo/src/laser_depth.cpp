@@ -71,11 +71,15 @@ LaserDepthMap::LaserDepthMap(const LaserDepthOptions& options, const StereoCamer
   std::vector<Kept> kept;
   const Eigen::Matrix3f R = T_camera_points.linear().cast<float>();
   const Eigen::Vector3f t = T_camera_points.translation().cast<float>();
+  const Eigen::RowVector3f R_z = R.row(2);
+  const float min_z = static_cast<float>(options.min_depth_m);
+  const float max_z = static_cast<float>(options.max_depth_m);
   Eigen::Vector3d uvu;
   for (const Eigen::Vector3f& p_points : points) {
+    // The depth first: most of a 360-degree scan is behind or beside the camera.
+    const float z = R_z.dot(p_points) + t.z();
+    if (!(z >= min_z && z <= max_z)) continue;
     const Eigen::Vector3f p_camera = R * p_points + t;
-    const double z = p_camera.z();
-    if (!(z >= options.min_depth_m && z <= options.max_depth_m)) continue;
     if (!camera.Project(p_camera.cast<double>(), &uvu)) continue;
     if (!(uvu(0) >= 0 && uvu(0) < width && uvu(1) >= 0 && uvu(1) < height)) continue;
     const int cx = std::min(cols_ - 1, static_cast<int>(uvu(0) / cell_px_));
