@@ -7,6 +7,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <tuple>
 #include <numeric>
 
 #include "fusionloc/common/yaml_options.hpp"
@@ -251,12 +252,16 @@ struct SparseUpdateResult {
   RbpfSlamStats stats;
 };
 
-SparseUpdateResult RunSparseUpdates(const test::LoopRun& run, bool match_between_updates) {
+// refine: refine_scans_with_icp (off by default here: the two tests below are about the
+// filter's own placement of the scans between its runs).
+SparseUpdateResult RunSparseUpdates(const test::LoopRun& run, bool match_between_updates,
+                                    bool refine = false) {
   RbpfSlamOptions o = TestOptions(10);
   o.linear_update = 0.9;
   o.angular_update = 1.0;
   o.max_turn_rate = 0.0;
   o.match_between_updates = match_between_updates;
+  o.refine_scans_with_icp = refine;
   RbpfSlam slam(o);
   SparseUpdateResult out;
   for (size_t k = 0; k < run.utimes.size(); ++k) {
@@ -294,6 +299,36 @@ TEST(RbpfSlam, ScansBetweenFilterRunsAreMatchedAloneWhenAsked) {
   const double err_on = MeanStepHeadingError(run, on.online);
   const double err_off = MeanStepHeadingError(run, off.online);
   EXPECT_LT(err_on, 0.5 * err_off) << "matched " << err_on << " odometry " << err_off;
+}
+
+// Mean translational error [m] of consecutive scans' relative poses against the truth.
+double MeanStepTranslationError(const test::LoopRun& run, const std::vector<Pose2>& poses) {
+  double sum = 0.0;
+  for (size_t k = 1; k < poses.size(); ++k) {
+    const Pose2 e = run.truth[k - 1].between(run.truth[k]).between(poses[k - 1].between(poses[k]));
+    sum += std::hypot(e.x, e.y);
+  }
+  return sum / static_cast<double>(poses.size() - 1);
+}
+
+TEST(RbpfSlam, ScanPosesRefinedByIcpAgainstTheirKeyframeAreCloserToTheTruth) {
+  // The grid matcher places a scan to about its 5 cm cell; ICP against the keyframe's scan to
+  // millimetres. Scan to scan, online and final, both errors fall.
+  const test::LoopRun run = SparseUpdateRun();
+  const SparseUpdateResult on = RunSparseUpdates(run, true, true);
+  const SparseUpdateResult off = RunSparseUpdates(run, true, false);
+  EXPECT_EQ(off.stats.scans_refined, 0);
+  EXPECT_GT(on.stats.scans_refined, static_cast<int64_t>(run.utimes.size()) / 2);
+  EXPECT_EQ(on.stats.processed, off.stats.processed);  // the filter itself is untouched
+  for (const auto& [name, a, b] : {std::make_tuple("online", &on.online, &off.online),
+                                   std::make_tuple("final", &on.final_poses, &off.final_poses)}) {
+    const double t_on = MeanStepTranslationError(run, *a), t_off = MeanStepTranslationError(run, *b);
+    const double h_on = MeanStepHeadingError(run, *a), h_off = MeanStepHeadingError(run, *b);
+    std::cout << name << ": step error " << t_on << " m, " << h_on << " rad refined; " << t_off
+              << " m, " << h_off << " rad not\n";
+    EXPECT_LT(t_on, 0.7 * t_off) << name;
+    EXPECT_LT(h_on, 0.7 * h_off) << name;
+  }
 }
 
 TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {

@@ -380,7 +380,8 @@ int main(int argc, char** argv) {
               "within 4 m (besides the previous scan)");
   bool dump = false;
   cli.AddFlag("dump", &dump,
-              "also write the estimate and reference trajectories (TUM) next to the PNGs");
+              "also write the estimate (final and online) and reference trajectories (TUM) next to "
+              "the PNGs");
   bool peers = false;
   cli.AddFlag("peers", &peers,
               "also run the peer laser SLAM side by side on each raw CARMEN log (mit-csail.clf): "
@@ -671,6 +672,8 @@ int main(int argc, char** argv) {
             .Add("degenerate_kept", static_cast<double>(st.degenerate_kept))
             .Add("recoveries", static_cast<double>(st.recoveries))
             .Add("skipped_fast_turn", static_cast<double>(st.skipped_fast_turn))
+            .Add("scans_refined_pct", 100.0 * static_cast<double>(st.scans_refined) /
+                                          std::max<double>(1.0, static_cast<double>(st.scans)))
             .Add("resamples", static_cast<double>(st.resamples))
             .Add("degenerate_pct",
                  100.0 * static_cast<double>(st.degenerate_matches) /
@@ -714,6 +717,7 @@ int main(int argc, char** argv) {
         WritePng(slam.BestMap(), est, ref_in_map, png);
         if (dump) {
           fl::eval::WriteTrajectoryTum(est, png_dir + "/" + file_stem + ".est.tum");
+          fl::eval::WriteTrajectoryTum(online, png_dir + "/" + file_stem + ".online.tum");
           fl::eval::WriteTrajectoryTum(data.ground_truth, png_dir + "/" + file_stem + ".ref.tum");
         }
         run.note =

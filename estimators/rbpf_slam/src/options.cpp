@@ -218,6 +218,8 @@ Status RbpfSlamOptions::Validate() const {
   FL_RETURN_IF_ERROR(NonNegative("angular_update", angular_update));
   FL_RETURN_IF_ERROR(NonNegative("max_turn_rate", max_turn_rate));
   FL_RETURN_IF_ERROR(NonNegative("turn_skip_max_gap", turn_skip_max_gap));
+  FL_RETURN_IF_ERROR(NonNegative("refine_max_correction_m", refine_max_correction_m));
+  FL_RETURN_IF_ERROR(NonNegative("refine_max_correction_rad", refine_max_correction_rad));
   FL_RETURN_IF_ERROR(grid.Validate());
   FL_RETURN_IF_ERROR(motion.Validate());
   FL_RETURN_IF_ERROR(matcher.Validate());

@@ -216,9 +216,29 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
       ++stats_.matched_between_updates;
     }
   }
+  matched = RefineAgainstKeyframe(scan.utime, &res->T_world_base) || matched;
   const int kf = anchor_.keyframe;
   RecordScan({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), matched});
   return Status::Ok();
+}
+
+bool RbpfSlam::RefineAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
+  if (!opt_.refine_scans_with_icp) return false;
+  const int kf = anchor_.keyframe;
+  if (kf < 0 || kf >= static_cast<int>(keyframes_.size())) return false;
+  const Keyframe& keyframe = keyframes_[static_cast<size_t>(kf)];
+  if (keyframe.utime == utime) return false;  // the keyframe's own scan
+  const fl::Pose2 T_kf_base = graph_.pose(kf).between(*T_world_base);
+  const IcpResult icp = AlignPointToLine(keyframe.normals_base, hits_base_, T_kf_base, opt_.icp);
+  if (!icp.ok || icp.degenerate_dims > 0) return false;
+  const fl::Pose2 correction = T_kf_base.between(icp.T_ref_query);
+  if (std::hypot(correction.x, correction.y) > opt_.refine_max_correction_m ||
+      std::abs(correction.theta) > opt_.refine_max_correction_rad) {
+    return false;
+  }
+  *T_world_base = graph_.pose(kf) * icp.T_ref_query;
+  ++stats_.scans_refined;
+  return true;
 }
 
 void RbpfSlam::FinishScan(ScanResult* res) {
@@ -227,6 +247,7 @@ void RbpfSlam::FinishScan(ScanResult* res) {
   res->keyframe_pending = false;
   MaybeAddKeyframe(pending_utime_, res);
   res->T_world_base = CurrentPose();
+  RefineAgainstKeyframe(pending_utime_, &res->T_world_base);
   const int kf = anchor_.keyframe;
   RecordScan({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), true});
 }

@@ -426,6 +426,14 @@ struct RbpfSlamOptions {
   // pose (RBPF_POSE and the final trajectory). The filter's particles are not changed.
   // Off: the odometry carries the pose between updates.
   bool match_between_updates = true;
+  // Each scan's pose relative to its keyframe (RBPF_POSE and the final trajectory) refined by
+  // point-to-line ICP of the scan against the keyframe's scan, from the filter's pose (the
+  // keyframe factors' ICP and options): the grid matcher places a scan to about its cell
+  // (5 cm), ICP to millimetres. Kept if ICP passed its checks with every direction constrained
+  // and moved the pose by at most refine_max_correction_m / _rad; else the filter's pose.
+  bool refine_scans_with_icp = true;
+  double refine_max_correction_m = 0.10;    // [m]
+  double refine_max_correction_rad = 0.05;  // [rad]
   int seed = 42;                   // [-] random seed (runs are reproducible)
   GridOptions grid;
   MotionOptions motion;
@@ -442,6 +450,9 @@ struct RbpfSlamOptions {
     a->Visit("max_turn_rate", &max_turn_rate);
     a->Visit("turn_skip_max_gap", &turn_skip_max_gap);
     a->Visit("match_between_updates", &match_between_updates);
+    a->Visit("refine_scans_with_icp", &refine_scans_with_icp);
+    a->Visit("refine_max_correction_m", &refine_max_correction_m);
+    a->Visit("refine_max_correction_rad", &refine_max_correction_rad);
     a->Visit("seed", &seed);
     a->Visit("grid", &grid);
     a->Visit("motion", &motion);

@@ -65,6 +65,8 @@ struct RbpfSlamStats {
                                         // beyond grid.max_size_m or absurd coordinates
   int64_t skipped_fast_turn = 0;        // scans not used: odometry turning > max_turn_rate
   int64_t matched_between_updates = 0;  // scans between updates matched alone (their pose)
+  int64_t scans_refined = 0;            // scan poses refined by ICP against their keyframe
+                                        //     (refine_scans_with_icp)
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates that fell back to odometry
@@ -183,6 +185,9 @@ class RbpfSlam {
 
   void ConvertScan(const LaserScan& scan, ScanResult* result);
   void RecordScan(const PathRecord& record);  // into path_, if kept
+  // The current scan's pose T_world_base refined against the anchor keyframe's scan
+  // (refine_scans_with_icp); true if refined (then *T_world_base moved).
+  bool RefineAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base);
   void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
   bool Integrate(Particle* p);
   // Integrates points (base frame) seen from T_world_base into map.
