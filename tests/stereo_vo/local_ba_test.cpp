@@ -36,6 +36,16 @@ void Perturb(std::vector<BaKeyframe>* window, double trans_m, double rot_deg, ui
   }
 }
 
+// Six keyframes 1 m apart seeing 300 points (pixel noise 0.3 px, `seed`), then perturbed by
+// Perturb(trans_m, rot_deg, perturb_seed); the true poses in *truth.
+std::vector<BaKeyframe> PerturbedWindow(const StereoCamera& cam, uint32_t seed, double trans_m,
+                                        double rot_deg, uint32_t perturb_seed,
+                                        std::vector<Eigen::Isometry3d>* truth) {
+  std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 6, 300, 1.0, 0.04, 0.3, seed, truth);
+  Perturb(&window, trans_m, rot_deg, perturb_seed);
+  return window;
+}
+
 TEST(StereoVoLocalBa, CollectTracksKeepsSharedTracksTriangulatedWhereTheDisparityIsLargest) {
   const StereoCamera cam = Cam();
   std::vector<BaKeyframe> window(3);
@@ -122,8 +132,7 @@ TEST(StereoVoLocalBa, ReducesTheErrorOfAPerturbedWindow) {
   const StereoCamera cam = Cam();
   for (uint32_t seed : {1u, 2u, 3u}) {
     std::vector<Eigen::Isometry3d> truth;
-    std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 6, 300, 1.0, 0.04, 0.3, seed, &truth);
-    Perturb(&window, 0.10, 1.0, seed + 100);
+    const std::vector<BaKeyframe> window = PerturbedWindow(cam, seed, 0.10, 1.0, seed + 100, &truth);
     double before_t = 0, before_r = 0;
     for (size_t k = 1; k < window.size(); ++k) {
       before_t = std::max(before_t, TransError(window[k].T_world_camera, truth[k]));
@@ -152,8 +161,7 @@ TEST(StereoVoLocalBa, TheFunctionToleranceStopsAtTheConvergedWindow) {
   const StereoCamera cam = Cam();
   for (uint32_t seed : {1u, 2u, 3u}) {
     std::vector<Eigen::Isometry3d> truth;
-    std::vector<BaKeyframe> window = MakeKeyframeWindow(cam, 6, 300, 1.0, 0.04, 0.3, seed, &truth);
-    Perturb(&window, 0.05, 0.5, seed + 200);
+    const std::vector<BaKeyframe> window = PerturbedWindow(cam, seed, 0.05, 0.5, seed + 200, &truth);
     LocalBaOptions converged;
     converged.function_tolerance = 0;
     converged.max_iterations = 30;
