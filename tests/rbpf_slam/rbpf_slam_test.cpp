@@ -331,6 +331,73 @@ TEST(RbpfSlam, ScanPosesRefinedByIcpAgainstTheirKeyframeAreCloserToTheTruth) {
   }
 }
 
+// The room loop scanned with the simulator's 10 cm range noise (or `range_noise`), 10 particles
+// with the default free-space margin (for that noise); the sequential factors each scan
+// published (loop closures left out), the final trajectory and the stats.
+struct FactorRun {
+  std::vector<KeyframeFactor> factors;
+  std::vector<StampedPose2> trajectory;
+  RbpfSlamStats stats;
+};
+FactorRun RunForFactors(const test::LoopRun& run, double noisy_factor_rms_per_noise) {
+  RbpfSlamOptions o;
+  o.particles = 10;
+  o.graph.noisy_factor_rms_per_noise = noisy_factor_rms_per_noise;
+  RbpfSlam slam(o);
+  FactorRun out;
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    for (const KeyframeFactor& f : r.factors) {
+      if (!f.is_loop_closure) out.factors.push_back(f);
+    }
+  }
+  slam.Finish();
+  out.trajectory = slam.Trajectory();
+  out.stats = slam.stats();
+  return out;
+}
+
+TEST(RbpfSlam, NoisyScansStillGiveTheFusionItsFactors) {
+  // At 10 cm range noise a right ICP fit has an RMS of 5-7 cm: most keyframe ICPs fail the
+  // 5 cm gate. Those that failed only it, within 0.8x the scan's noise, are published anyway
+  // (graph.noisy_factor_rms_per_noise) with their calibrated information; the internal graph,
+  // and so the trajectory, are exactly as without them.
+  test::LoopRunOptions lo;
+  lo.step_m = 0.25;
+  lo.range_noise = 0.1;
+  const test::LoopRun run = test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
+  const FactorRun on = RunForFactors(run, RbpfSlamOptions().graph.noisy_factor_rms_per_noise);
+  const FactorRun off = RunForFactors(run, 0.0);
+  EXPECT_EQ(off.stats.noisy_factors, 0);
+  EXPECT_GT(on.stats.noisy_factors, 5);
+  EXPECT_EQ(on.factors.size(), off.factors.size() + static_cast<size_t>(on.stats.noisy_factors));
+  ASSERT_EQ(on.trajectory.size(), off.trajectory.size());
+  for (size_t k = 0; k < on.trajectory.size(); ++k) {
+    EXPECT_EQ(on.trajectory[k].T_world_base.x, off.trajectory[k].T_world_base.x) << k;
+    EXPECT_EQ(on.trajectory[k].T_world_base.theta, off.trajectory[k].T_world_base.theta) << k;
+  }
+  // The published factors against the truth: e^T Omega e, median near the calibrated ~2.4.
+  std::map<fl::Utime, size_t> scan_of;
+  for (size_t k = 0; k < run.utimes.size(); ++k) scan_of[run.utimes[k]] = k;
+  std::vector<double> chi2;
+  for (const KeyframeFactor& f : on.factors) {
+    const Pose2 truth = run.truth[scan_of.at(f.utime_i)].between(run.truth[scan_of.at(f.utime_j)]);
+    const Pose2 d = truth.between(f.T_i_j);
+    const Eigen::Vector3d e(d.x, d.y, d.theta);
+    chi2.push_back(e.dot(f.information * e));
+  }
+  std::nth_element(chi2.begin(), chi2.begin() + static_cast<std::ptrdiff_t>(chi2.size() / 2),
+                   chi2.end());
+  const double median = chi2[chi2.size() / 2];
+  std::cout << "factors " << on.factors.size() << " (noisy " << on.stats.noisy_factors
+            << "), chi2 median " << median << "\n";
+  EXPECT_GT(median, 0.5);
+  EXPECT_LT(median, 8.0);
+  // Clean scans (1 cm) never reach it.
+  EXPECT_EQ(RunForFactors(RoomLoopRun(1), 0.8).stats.noisy_factors, 0);
+}
+
 TEST(RbpfSlam, LoopClosureSpacingSkipsTheSearchAfterAClosure) {
   // Two laps: on the second, nearly every keyframe could close a loop. With spacing 4 the
   // closures' keyframes are at least 4 apart; with the default (1) some are closer.

@@ -680,6 +680,7 @@ int main(int argc, char** argv) {
                      std::max<double>(1.0, static_cast<double>(st.processed * options.particles)))
             .Add("dropped", static_cast<double>(skipped))
             .Add("factors", static_cast<double>(chi2_seq.size()))
+            .Add("noisy_factors", static_cast<double>(st.noisy_factors))
             .Add("factor_chi2_median",
                  chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).median)
             .Add("factor_chi2_p95", chi2_seq.empty() ? -1.0 : fl::bench::ComputeStats(chi2_seq).p95)

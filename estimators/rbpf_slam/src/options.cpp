@@ -181,6 +181,7 @@ Status GraphOptions::Validate() const {
   FL_RETURN_IF_ERROR(
       Positive("graph.divergence_odometry_rms_ratio", divergence_odometry_rms_ratio));
   FL_RETURN_IF_ERROR(NonNegative("graph.edge_sigma", edge_sigma));
+  FL_RETURN_IF_ERROR(NonNegative("graph.noisy_factor_rms_per_noise", noisy_factor_rms_per_noise));
   FL_RETURN_IF_ERROR(Positive("graph.filter_edge_sigma_scale", filter_edge_sigma_scale));
   FL_RETURN_IF_ERROR(Positive("graph.filter_edge_min_sigma_m", filter_edge_min_sigma_m));
   FL_RETURN_IF_ERROR(Positive("graph.filter_edge_min_sigma_rad", filter_edge_min_sigma_rad));

@@ -31,6 +31,15 @@ bool Beyond(const fl::Pose2& d, double m, double rad) {
 bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
   return icp.ok && Within(start.between(icp.T_ref_query), 0.5, 0.3);
 }
+
+// An ICP fit that failed only the RMS gate, with its RMS within rms_per_noise times the scan's
+// range noise and near its start (graph.noisy_factor_rms_per_noise).
+bool NoisyButRightFit(const IcpResult& icp, const IcpOptions& o, double range_noise,
+                      double rms_per_noise, const fl::Pose2& start) {
+  return !icp.ok && icp.pairs >= o.min_points && icp.inlier_fraction >= o.min_inlier_fraction &&
+         icp.rms > o.max_rms && icp.rms <= rms_per_noise * range_noise &&
+         Within(start.between(icp.T_ref_query), 0.5, 0.3);
+}
 }  // namespace
 
 RbpfSlam::RbpfSlam(const RbpfSlamOptions& options)
@@ -377,6 +386,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   kf.path_length = path_length_;
   kf.odom = input_.odom();
   kf.odometry_jumps = stats_.odometry_jumps;
+  kf.range_noise = ScanRangeNoise(kf.points_base);
   keyframes_.push_back(std::move(kf));
   const int j = graph_.AddNode(pose);
   ++stats_.keyframes;
@@ -457,6 +467,11 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
       res->factors.push_back(Factor(i, j, icp, false));
     } else {
       ++stats_.icp_failures;
+      if (NoisyButRightFit(icp, opt_.icp, keyframes_[j].range_noise,
+                           g.noisy_factor_rms_per_noise, prior)) {
+        ++stats_.noisy_factors;
+        res->factors.push_back(Factor(i, j, icp, false));  // for the fusion only (options.hpp)
+      }
     }
   }
   // Without ICP, a weak edge holds j where it is (the filter's pose, or the recovered one).

@@ -74,6 +74,8 @@ struct RbpfSlamStats {
   int64_t degenerate_matches = 0;       // particle updates with a degenerate direction (corridor)
   int64_t keyframes = 0;
   int64_t icp_failures = 0;             // sequential keyframe ICP that failed verification
+  int64_t noisy_factors = 0;            // ... of which published anyway: only the RMS gate, at
+                                        //     the scan's noise (graph.noisy_factor_rms_per_noise)
   int64_t loop_candidates = 0;
   int64_t loop_searches = 0;            // correlative searches after a failed loop ICP
   int64_t loop_searches_skipped = 0;    // ... not run: ICP failed on partial overlap only
@@ -166,6 +168,7 @@ class RbpfSlam {
     double path_length;                       // [m] travelled when created
     fl::Pose2 odom;                           // odometry pose (flagged jumps removed) then
     int64_t odometry_jumps = 0;               // flagged odometry jumps before it
+    double range_noise = 0.0;                 // [m] ScanRangeNoise of its scan
   };
   struct Particle {
     fl::Pose2 pose;
