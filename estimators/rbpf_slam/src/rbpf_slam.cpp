@@ -28,8 +28,12 @@ bool Beyond(const fl::Pose2& d, double m, double rad) {
 }
 
 // A sequential ICP result is trusted only within 0.5 m / 0.3 rad of where it started.
+// The fit ended within 0.5 m / 0.3 rad of where it started.
+bool CloseToStart(const IcpResult& icp, const fl::Pose2& start) {
+  return Within(start.between(icp.T_ref_query), 0.5, 0.3);
+}
 bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
-  return icp.ok && Within(start.between(icp.T_ref_query), 0.5, 0.3);
+  return icp.ok && CloseToStart(icp, start);
 }
 
 // An ICP fit that failed only the RMS gate, with its RMS within rms_per_noise times the scan's
@@ -37,8 +41,7 @@ bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
 bool NoisyButRightFit(const IcpResult& icp, const IcpOptions& o, double range_noise,
                       double rms_per_noise, const fl::Pose2& start) {
   return !icp.ok && icp.pairs >= o.min_points && icp.inlier_fraction >= o.min_inlier_fraction &&
-         icp.rms > o.max_rms && icp.rms <= rms_per_noise * range_noise &&
-         Within(start.between(icp.T_ref_query), 0.5, 0.3);
+         icp.rms > o.max_rms && icp.rms <= rms_per_noise * range_noise && CloseToStart(icp, start);
 }
 }  // namespace
 

@@ -389,6 +389,8 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   status_.Set("divergences", static_cast<double>(s.divergences));
   status_.Set("recoveries", static_cast<double>(s.recoveries));
   status_.Set("skipped_fast_turn", static_cast<double>(s.skipped_fast_turn));
+  status_.Set("scans_refined", static_cast<double>(s.scans_refined));
+  status_.Set("noisy_factors", static_cast<double>(s.noisy_factors));
   status_.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
   status_.Set("invalid_beams", static_cast<double>(s.invalid_beams));
   status_.Set("map_integrations_refused", static_cast<double>(s.map_integrations_refused));

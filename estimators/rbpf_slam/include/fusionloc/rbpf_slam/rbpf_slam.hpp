@@ -123,7 +123,8 @@ class RbpfSlam {
 
   fl::Pose2 CurrentPose() const;
   // Pose of every accepted scan (the final, smoothed trajectory at the sensor rate): keyframe
-  // poses from the graph composed with the best particle's motion since that keyframe; a scan
+  // poses from the graph composed with the scan's pose relative to its keyframe (the best
+  // particle's, refined by ICP against the keyframe's scan: refine_scans_with_icp); a scan
   // the filter did not run on is blended between the filtered scans around it (the next
   // one's correction of the odometry spread over the scans before it).
   // Without the scan path (SetKeepScanPath(false)): KeyframePoses().
