@@ -331,6 +331,13 @@ TEST(RbpfSlam, ScanPosesRefinedByIcpAgainstTheirKeyframeAreCloserToTheTruth) {
   }
 }
 
+// Each scan's index in `run` by its time.
+std::map<fl::Utime, size_t> ScanIndex(const test::LoopRun& run) {
+  std::map<fl::Utime, size_t> index;
+  for (size_t k = 0; k < run.utimes.size(); ++k) index[run.utimes[k]] = k;
+  return index;
+}
+
 // The room loop scanned with the simulator's 10 cm range noise (or `range_noise`), 10 particles
 // with the default free-space margin (for that noise); the sequential factors each scan
 // published (loop closures left out), the final trajectory and the stats.
@@ -378,8 +385,7 @@ TEST(RbpfSlam, NoisyScansStillGiveTheFusionItsFactors) {
     EXPECT_EQ(on.trajectory[k].T_world_base.theta, off.trajectory[k].T_world_base.theta) << k;
   }
   // The published factors against the truth: e^T Omega e, median near the calibrated ~2.4.
-  std::map<fl::Utime, size_t> scan_of;
-  for (size_t k = 0; k < run.utimes.size(); ++k) scan_of[run.utimes[k]] = k;
+  const std::map<fl::Utime, size_t> scan_of = ScanIndex(run);
   std::vector<double> chi2;
   for (const KeyframeFactor& f : on.factors) {
     const Pose2 truth = run.truth[scan_of.at(f.utime_i)].between(run.truth[scan_of.at(f.utime_j)]);
@@ -446,8 +452,7 @@ TEST(RbpfSlam, RevisitsReuseKeyframesAndTheGraphStopsGrowing) {
   const int laps = 4;
   const test::LoopRun run = RoomLoopRun(laps);
   const size_t per_lap = run.utimes.size() / laps;
-  std::map<fl::Utime, size_t> index;
-  for (size_t k = 0; k < run.utimes.size(); ++k) index[run.utimes[k]] = k;
+  const std::map<fl::Utime, size_t> index = ScanIndex(run);
   struct Outcome {
     std::vector<int64_t> keyframes_after_lap;
     RbpfSlamStats stats;
