@@ -69,6 +69,16 @@ test::LoopRun RoomLoopRun(int laps) {
   return test::MakeLoopRun(test::LaserWorld::RoomWithBoxes(), lo);
 }
 
+// Feeds every scan of `run` to `slam` (each must be accepted); each(k, result) after scan k.
+template <class Each>
+void Drive(RbpfSlam* slam, const test::LoopRun& run, Each each) {
+  for (size_t k = 0; k < run.utimes.size(); ++k) {
+    ScanResult r;
+    EXPECT_TRUE(slam->AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    each(k, r);
+  }
+}
+
 // Runs a whole simulated drive through a filter with options `o`; returns the largest error of
 // its final trajectory against the truth and (optionally) its stats.
 double MaxTrajectoryError(const RbpfSlamOptions& o, const test::LoopRun& run,
@@ -264,11 +274,7 @@ SparseUpdateResult RunSparseUpdates(const test::LoopRun& run, bool match_between
   o.refine_scans_with_icp = refine;
   RbpfSlam slam(o);
   SparseUpdateResult out;
-  for (size_t k = 0; k < run.utimes.size(); ++k) {
-    ScanResult r;
-    EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
-    out.online.push_back(r.T_world_base);
-  }
+  Drive(&slam, run, [&](size_t, const ScanResult& r) { out.online.push_back(r.T_world_base); });
   out.stats = slam.stats();
   slam.Finish();
   for (const auto& p : slam.Trajectory()) out.final_poses.push_back(p.T_world_base);
@@ -352,13 +358,11 @@ FactorRun RunForFactors(const test::LoopRun& run, double noisy_factor_rms_per_no
   o.graph.noisy_factor_rms_per_noise = noisy_factor_rms_per_noise;
   RbpfSlam slam(o);
   FactorRun out;
-  for (size_t k = 0; k < run.utimes.size(); ++k) {
-    ScanResult r;
-    EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+  Drive(&slam, run, [&](size_t, const ScanResult& r) {
     for (const KeyframeFactor& f : r.factors) {
       if (!f.is_loop_closure) out.factors.push_back(f);
     }
-  }
+  });
   slam.Finish();
   out.trajectory = slam.Trajectory();
   out.stats = slam.stats();
@@ -465,9 +469,7 @@ TEST(RbpfSlam, RevisitsReuseKeyframesAndTheGraphStopsGrowing) {
     o.graph.reuse_distance = reuse_distance;
     RbpfSlam slam(o);
     Outcome out;
-    for (size_t k = 0; k < run.utimes.size(); ++k) {
-      ScanResult r;
-      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    Drive(&slam, run, [&](size_t k, const ScanResult& r) {
       for (const KeyframeFactor& f : r.factors) {
         EXPECT_LT(f.utime_i, f.utime_j);
         EXPECT_GT(f.information.determinant(), 0.0);
@@ -481,7 +483,7 @@ TEST(RbpfSlam, RevisitsReuseKeyframesAndTheGraphStopsGrowing) {
             out.worst_reuse_factor_err_m, (truth.translation() - f.T_i_j.translation()).norm());
       }
       if ((k + 1) % per_lap == 0) out.keyframes_after_lap.push_back(slam.stats().keyframes);
-    }
+    });
     slam.Finish();
     out.stats = slam.stats();
     const auto traj = slam.Trajectory();
@@ -539,15 +541,13 @@ TEST(RbpfSlam, FullPlacesGetNoMoreKeyframesWhenReuseFails) {
     o.graph.max_keyframes_per_place = max_per_place;
     RbpfSlam slam(o);
     Outcome out;
-    for (size_t k = 0; k < run.utimes.size(); ++k) {
-      ScanResult r;
-      EXPECT_TRUE(slam.AddScan(MakeScan(run.utimes[k], run.ranges[k]), run.odom[k], &r).ok());
+    Drive(&slam, run, [&](size_t k, const ScanResult& r) {
       for (const KeyframeFactor& f : r.factors) {
         EXPECT_LT(f.utime_i, f.utime_j);
         if (f.keyframe_j < 0) ++out.factors_to_scans;
       }
       if ((k + 1) % per_lap == 0) out.keyframes_after_lap.push_back(slam.stats().keyframes);
-    }
+    });
     slam.Finish();
     out.stats = slam.stats();
     const auto traj = slam.Trajectory();

@@ -92,7 +92,11 @@ std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts,
 
 std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts,
                                         const IcpOptions& o) {
-  const double noise = ScanRangeNoise(pts);
+  return ComputeNormals(pts, o, ScanRangeNoise(pts));
+}
+
+std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& pts,
+                                        const IcpOptions& o, double noise) {
   return NormalsWithin(pts, o.normal_radius, o.normal_max_gap, o.normal_max_eigen_ratio,
                        std::max(o.normal_radius, o.normal_radius_per_noise * noise),
                        std::max(o.normal_max_gap, o.normal_gap_per_noise * noise));
@@ -361,6 +365,7 @@ IcpResult AlignPointToLine(const std::vector<PointNormal>& reference,
                 std::to_string(o.min_inlier_fraction);
   } else if (r.rms > o.max_rms) {
     r.failure = "RMS " + std::to_string(r.rms) + " m above " + std::to_string(o.max_rms);
+    r.failed_only_rms = true;
   } else {
     // A good fit is accepted even if the last steps were still creeping below 1e-5 m.
     r.ok = true;

@@ -38,10 +38,9 @@ bool NearStart(const IcpResult& icp, const fl::Pose2& start) {
 
 // An ICP fit that failed only the RMS gate, with its RMS within rms_per_noise times the scan's
 // range noise and near its start (graph.noisy_factor_rms_per_noise).
-bool NoisyButRightFit(const IcpResult& icp, const IcpOptions& o, double range_noise,
-                      double rms_per_noise, const fl::Pose2& start) {
-  return !icp.ok && icp.pairs >= o.min_points && icp.inlier_fraction >= o.min_inlier_fraction &&
-         icp.rms > o.max_rms && icp.rms <= rms_per_noise * range_noise && CloseToStart(icp, start);
+bool NoisyButRightFit(const IcpResult& icp, double range_noise, double rms_per_noise,
+                      const fl::Pose2& start) {
+  return icp.failed_only_rms && icp.rms <= rms_per_noise * range_noise && CloseToStart(icp, start);
 }
 }  // namespace
 
@@ -385,11 +384,11 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
   Keyframe kf;
   kf.utime = utime;
   kf.points_base = hits_base_;
-  kf.normals_base = ComputeNormals(kf.points_base, opt_.icp);
+  kf.range_noise = ScanRangeNoise(kf.points_base);
+  kf.normals_base = ComputeNormals(kf.points_base, opt_.icp, kf.range_noise);
   kf.path_length = path_length_;
   kf.odom = input_.odom();
   kf.odometry_jumps = stats_.odometry_jumps;
-  kf.range_noise = ScanRangeNoise(kf.points_base);
   keyframes_.push_back(std::move(kf));
   const int j = graph_.AddNode(pose);
   ++stats_.keyframes;
@@ -470,8 +469,7 @@ void RbpfSlam::MaybeAddKeyframe(fl::Utime utime, ScanResult* res) {
       res->factors.push_back(Factor(i, j, icp, false));
     } else {
       ++stats_.icp_failures;
-      if (NoisyButRightFit(icp, opt_.icp, keyframes_[j].range_noise,
-                           g.noisy_factor_rms_per_noise, prior)) {
+      if (NoisyButRightFit(icp, keyframes_[j].range_noise, g.noisy_factor_rms_per_noise, prior)) {
         ++stats_.noisy_factors;
         res->factors.push_back(Factor(i, j, icp, false));  // for the fusion only (options.hpp)
       }

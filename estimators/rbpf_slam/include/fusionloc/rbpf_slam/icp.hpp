@@ -65,6 +65,9 @@ std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& orde
 // corridor's axis that the scene does not have.
 std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& ordered_points,
                                         const IcpOptions& options);
+// ... with the scan's noise already estimated (range_noise = ScanRangeNoise(ordered_points)).
+std::vector<PointNormal> ComputeNormals(const std::vector<Eigen::Vector2d>& ordered_points,
+                                        const IcpOptions& options, double range_noise);
 
 // Σ and Ω = Σ⁻¹ as documented above from H = Σ JᵀJ, M = Σ e² JᵀJ over n pairs and the
 // residual correlation ρ; `length_m` is the scale L of the heading (RMS point range). Returns
@@ -90,6 +93,7 @@ struct IcpResult {
   int pairs = 0;
   int iterations = 0;
   bool converged = false;        // the last step was below 1e-5 m / rad
+  bool failed_only_rms = false;  // every check passed but the RMS gate (options.max_rms)
   std::string failure;           // why !ok
 };
 
