@@ -674,6 +674,8 @@ int main(int argc, char** argv) {
             .Add("skipped_fast_turn", static_cast<double>(st.skipped_fast_turn))
             .Add("scans_refined_pct", 100.0 * static_cast<double>(st.scans_refined) /
                                           std::max<double>(1.0, static_cast<double>(st.scans)))
+            .Add("turn_placed_pct", 100.0 * static_cast<double>(st.turn_scans_placed) /
+                                        std::max<double>(1.0, static_cast<double>(st.scans)))
             .Add("resamples", static_cast<double>(st.resamples))
             .Add("degenerate_pct",
                  100.0 * static_cast<double>(st.degenerate_matches) /

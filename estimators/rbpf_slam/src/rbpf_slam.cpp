@@ -200,6 +200,7 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
   const bool fast_turn = opt_.max_turn_rate > 0.0 && dt_s <= opt_.turn_skip_max_gap &&
                          std::abs(step.theta) > opt_.max_turn_rate * dt_s;
   if (fast_turn && (moved || pending_jump_)) ++stats_.skipped_fast_turn;
+  if (fast_turn) last_fast_turn_ = scan.utime;
   if ((moved || pending_jump_) && !fast_turn) {
     ProcessFilter(delta, pending_jump_, res);
     pending_jump_ = false;
@@ -227,27 +228,58 @@ fl::Status RbpfSlam::AddScan(const LaserScan& scan, const fl::Pose2& odom_pose,
       ++stats_.matched_between_updates;
     }
   }
-  matched = RefineAgainstKeyframe(scan.utime, &res->T_world_base) || matched;
+  matched = PlaceAgainstKeyframe(scan.utime, &res->T_world_base) || matched;
   const int kf = anchor_.keyframe;
   RecordScan({scan.utime, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), matched});
   return Status::Ok();
 }
 
+const RbpfSlam::Keyframe* RbpfSlam::PlacementKeyframe(fl::Utime utime) const {
+  const int kf = anchor_.keyframe;
+  if (kf < 0 || kf >= static_cast<int>(keyframes_.size())) return nullptr;
+  const Keyframe& keyframe = keyframes_[static_cast<size_t>(kf)];
+  if (keyframe.utime == utime) return nullptr;  // the keyframe's own scan
+  return &keyframe;
+}
+
+bool RbpfSlam::PlaceAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
+  const bool in_turn =
+      opt_.turn_search.enabled && last_fast_turn_ &&
+      static_cast<double>(utime - *last_fast_turn_) * 1e-6 <= opt_.turn_search_after_s;
+  if (in_turn && SearchAgainstKeyframe(utime, T_world_base)) return true;
+  return RefineAgainstKeyframe(utime, T_world_base);
+}
+
+bool RbpfSlam::SearchAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
+  const Keyframe* keyframe = PlacementKeyframe(utime);
+  if (keyframe == nullptr) return false;
+  ++stats_.turn_searches;
+  const fl::Pose2& T_world_kf = graph_.pose(anchor_.keyframe);
+  const CorrelativeResult cr = CorrelativeMatch(
+      keyframe->points_base, hits_base_, T_world_kf.between(*T_world_base), opt_.turn_search);
+  if (!cr.ok || cr.at_window_edge || cr.score < opt_.turn_search.min_score) return false;
+  const IcpResult icp =
+      AlignPointToLine(keyframe->normals_base, hits_base_, cr.T_ref_query, opt_.icp);
+  if (!icp.ok || icp.degenerate_dims > 0) return false;
+  *T_world_base = T_world_kf * icp.T_ref_query;
+  ++stats_.turn_scans_placed;
+  return true;
+}
+
 bool RbpfSlam::RefineAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
   if (!opt_.refine_scans_with_icp) return false;
-  const int kf = anchor_.keyframe;
-  if (kf < 0 || kf >= static_cast<int>(keyframes_.size())) return false;
-  const Keyframe& keyframe = keyframes_[static_cast<size_t>(kf)];
-  if (keyframe.utime == utime) return false;  // the keyframe's own scan
-  const fl::Pose2 T_kf_base = graph_.pose(kf).between(*T_world_base);
-  const IcpResult icp = AlignPointToLine(keyframe.normals_base, hits_base_, T_kf_base, opt_.icp);
+  const Keyframe* keyframe = PlacementKeyframe(utime);
+  if (keyframe == nullptr) return false;
+  const fl::Pose2& T_world_kf = graph_.pose(anchor_.keyframe);
+  const fl::Pose2 T_kf_base = T_world_kf.between(*T_world_base);
+  const IcpResult icp = AlignPointToLine(keyframe->normals_base, hits_base_, T_kf_base, opt_.icp);
   if (!icp.ok || icp.degenerate_dims > 0) return false;
   const fl::Pose2 correction = T_kf_base.between(icp.T_ref_query);
   if (std::hypot(correction.x, correction.y) > opt_.refine_max_correction_m ||
       std::abs(correction.theta) > opt_.refine_max_correction_rad) {
     return false;
   }
-  *T_world_base = graph_.pose(kf) * icp.T_ref_query;
+  *T_world_base = T_world_kf * icp.T_ref_query;
   ++stats_.scans_refined;
   return true;
 }
@@ -258,7 +290,7 @@ void RbpfSlam::FinishScan(ScanResult* res) {
   res->keyframe_pending = false;
   MaybeAddKeyframe(pending_utime_, res);
   res->T_world_base = CurrentPose();
-  RefineAgainstKeyframe(pending_utime_, &res->T_world_base);
+  PlaceAgainstKeyframe(pending_utime_, &res->T_world_base);
   const int kf = anchor_.keyframe;
   RecordScan({pending_utime_, kf, graph_.pose(kf).between(res->T_world_base), input_.odom(), true});
 }

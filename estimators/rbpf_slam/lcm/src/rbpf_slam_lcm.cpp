@@ -390,6 +390,7 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   status_.Set("recoveries", static_cast<double>(s.recoveries));
   status_.Set("skipped_fast_turn", static_cast<double>(s.skipped_fast_turn));
   status_.Set("scans_refined", static_cast<double>(s.scans_refined));
+  status_.Set("turn_scans_placed", static_cast<double>(s.turn_scans_placed));
   status_.Set("noisy_factors", static_cast<double>(s.noisy_factors));
   status_.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
   status_.Set("invalid_beams", static_cast<double>(s.invalid_beams));
@@ -426,6 +427,8 @@ std::string RbpfSlamNode::Summary() const {
          " candidates), divergences caught " + std::to_string(s.divergences) +
          ", lost-track recoveries " + std::to_string(s.recoveries) +
          ", scans held back in fast turns " + std::to_string(s.skipped_fast_turn) +
+         " (placed by the turn search " + std::to_string(s.turn_scans_placed) + " of " +
+         std::to_string(s.turn_searches) + " searched)" +
          ", dropped (time) " + std::to_string(s.dropped_time_backwards) + ", rejected " +
          std::to_string(s.rejected_bad_scan) + ", odometry jumps " +
          std::to_string(s.odometry_jumps) + ", map integrations refused (beyond grid.max_size_m) " +

@@ -218,6 +218,15 @@ inline CorrelativeOptions RecoverySearchDefaults() {
   return o;
 }
 
+// Defaults of the search that places a scan taken in a fast turn (RbpfSlamOptions::turn_search):
+// a window as wide as the odometry's heading error there (raw CSAIL: up to ~25°).
+inline CorrelativeOptions TurnSearchDefaults() {
+  CorrelativeOptions o;
+  o.linear_window = 0.5;
+  o.angular_window = 0.45;
+  return o;
+}
+
 struct GraphOptions {
   bool enabled = true;                 // [-] false: plain RBPF, no keyframe graph
   double keyframe_distance = 0.5;      // [m] new keyframe after this much travel
@@ -447,6 +456,15 @@ struct RbpfSlamOptions {
   bool refine_scans_with_icp = true;
   double refine_max_correction_m = 0.10;    // [m]
   double refine_max_correction_rad = 0.05;  // [rad]
+  // A scan taken in a fast turn (faster than max_turn_rate), or within turn_search_after_s
+  // after one, is placed by a correlative search of its keyframe's scan around the filter's
+  // pose, then ICP from the search's best pose (kept if ICP passed its checks with every
+  // direction constrained; else refine_scans_with_icp as for any scan). There the odometry's
+  // heading can be 20° off what the laser saw (raw CSAIL: its turns start and end ~0.1-0.2 s
+  // before the laser's), beyond the grid matcher's and the refinement's reach. The scan's
+  // pose only (RBPF_POSE, the final trajectory); the particles are not changed.
+  CorrelativeOptions turn_search = TurnSearchDefaults();  // enabled: false = off
+  double turn_search_after_s = 2.0;  // [s]
   int seed = 42;                   // [-] random seed (runs are reproducible)
   GridOptions grid;
   MotionOptions motion;
@@ -466,6 +484,8 @@ struct RbpfSlamOptions {
     a->Visit("refine_scans_with_icp", &refine_scans_with_icp);
     a->Visit("refine_max_correction_m", &refine_max_correction_m);
     a->Visit("refine_max_correction_rad", &refine_max_correction_rad);
+    a->Visit("turn_search", &turn_search);
+    a->Visit("turn_search_after_s", &turn_search_after_s);
     a->Visit("seed", &seed);
     a->Visit("grid", &grid);
     a->Visit("motion", &motion);

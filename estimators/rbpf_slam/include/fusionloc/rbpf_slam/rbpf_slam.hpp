@@ -66,6 +66,9 @@ struct RbpfSlamStats {
   int64_t skipped_fast_turn = 0;        // scans not used: odometry turning > max_turn_rate
   int64_t matched_between_updates = 0;  // scans between updates matched alone (their pose)
   int64_t scans_refined = 0;            // scan poses refined by ICP against their keyframe
+  int64_t turn_searches = 0;            // scans in or just after a fast turn searched against
+                                        //     their keyframe (turn_search)
+  int64_t turn_scans_placed = 0;        // ... and placed by the search and ICP
                                         //     (refine_scans_with_icp)
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
@@ -189,8 +192,17 @@ class RbpfSlam {
 
   void ConvertScan(const LaserScan& scan, ScanResult* result);
   void RecordScan(const PathRecord& record);  // into path_, if kept
-  // The current scan's pose T_world_base refined against the anchor keyframe's scan
-  // (refine_scans_with_icp); true if refined (then *T_world_base moved).
+  // The current scan's pose T_world_base against the anchor keyframe's scan: placed by the
+  // turn search if the scan is in or just after a fast turn (SearchAgainstKeyframe), else, or
+  // if that failed, refined (RefineAgainstKeyframe); true if *T_world_base moved.
+  bool PlaceAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base);
+  // The anchor keyframe the current scan is placed against; nullptr if there is none or the
+  // scan is its own.
+  const Keyframe* PlacementKeyframe(fl::Utime utime) const;
+  // Correlative search (turn_search) around T_world_base, then ICP; true if ICP passed its
+  // checks with every direction constrained (then *T_world_base moved there).
+  bool SearchAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base);
+  // ICP from T_world_base (refine_scans_with_icp); true if refined within the bounds.
   bool RefineAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base);
   void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
   bool Integrate(Particle* p);
@@ -258,6 +270,7 @@ class RbpfSlam {
 
   ScanInput input_;              // validation, stamps, odometry with jumps removed
   fl::Pose2 odom_at_processed_;  // input_.odom() when the filter last ran
+  std::optional<fl::Utime> last_fast_turn_;  // the latest scan taken in a fast turn
   bool pending_jump_ = false;
   bool keyframe_pending_ = false;  // AddScan deferred the keyframe stage of ...
   fl::Utime pending_utime_ = 0;    // ... the scan at this time
