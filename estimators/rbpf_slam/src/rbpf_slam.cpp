@@ -243,11 +243,11 @@ const RbpfSlam::Keyframe* RbpfSlam::PlacementKeyframe(fl::Utime utime) const {
 }
 
 bool RbpfSlam::PlaceAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
+  if (RefineAgainstKeyframe(utime, T_world_base)) return true;
   const bool in_turn =
       opt_.turn_search.enabled && last_fast_turn_ &&
       static_cast<double>(utime - *last_fast_turn_) * 1e-6 <= opt_.turn_search_after_s;
-  if (in_turn && SearchAgainstKeyframe(utime, T_world_base)) return true;
-  return RefineAgainstKeyframe(utime, T_world_base);
+  return in_turn && SearchAgainstKeyframe(utime, T_world_base);
 }
 
 bool RbpfSlam::SearchAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {

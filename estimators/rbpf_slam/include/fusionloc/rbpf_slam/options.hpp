@@ -457,12 +457,12 @@ struct RbpfSlamOptions {
   double refine_max_correction_m = 0.10;    // [m]
   double refine_max_correction_rad = 0.05;  // [rad]
   // A scan taken in a fast turn (faster than max_turn_rate), or within turn_search_after_s
-  // after one, is placed by a correlative search of its keyframe's scan around the filter's
-  // pose, then ICP from the search's best pose (kept if ICP passed its checks with every
-  // direction constrained; else refine_scans_with_icp as for any scan). There the odometry's
-  // heading can be 20° off what the laser saw (raw CSAIL: its turns start and end ~0.1-0.2 s
-  // before the laser's), beyond the grid matcher's and the refinement's reach. The scan's
-  // pose only (RBPF_POSE, the final trajectory); the particles are not changed.
+  // after one, that the refinement above could not place is placed by a correlative search of
+  // its keyframe's scan around the filter's pose, then ICP from the search's best pose (kept
+  // if ICP passed its checks with every direction constrained). There the odometry's heading
+  // can be 20° off what the laser saw (raw CSAIL: its turns start and end ~0.1-0.2 s before
+  // the laser's), beyond the grid matcher's and the refinement's reach. The scan's pose only
+  // (RBPF_POSE, the final trajectory); the particles are not changed.
   CorrelativeOptions turn_search = TurnSearchDefaults();  // enabled: false = off
   double turn_search_after_s = 2.0;  // [s]
   int seed = 42;                   // [-] random seed (runs are reproducible)

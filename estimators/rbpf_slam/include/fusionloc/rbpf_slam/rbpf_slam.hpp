@@ -66,7 +66,8 @@ struct RbpfSlamStats {
   int64_t skipped_fast_turn = 0;        // scans not used: odometry turning > max_turn_rate
   int64_t matched_between_updates = 0;  // scans between updates matched alone (their pose)
   int64_t scans_refined = 0;            // scan poses refined by ICP against their keyframe
-  int64_t turn_searches = 0;            // scans in or just after a fast turn searched against
+  int64_t turn_searches = 0;            // scans in or just after a fast turn that the
+                                        //     refinement could not place, searched against
                                         //     their keyframe (turn_search)
   int64_t turn_scans_placed = 0;        // ... and placed by the search and ICP
                                         //     (refine_scans_with_icp)
@@ -192,9 +193,9 @@ class RbpfSlam {
 
   void ConvertScan(const LaserScan& scan, ScanResult* result);
   void RecordScan(const PathRecord& record);  // into path_, if kept
-  // The current scan's pose T_world_base against the anchor keyframe's scan: placed by the
-  // turn search if the scan is in or just after a fast turn (SearchAgainstKeyframe), else, or
-  // if that failed, refined (RefineAgainstKeyframe); true if *T_world_base moved.
+  // The current scan's pose T_world_base against the anchor keyframe's scan: refined
+  // (RefineAgainstKeyframe), or if that failed and the scan is in or just after a fast turn,
+  // placed by the turn search (SearchAgainstKeyframe); true if *T_world_base moved.
   bool PlaceAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base);
   // The anchor keyframe the current scan is placed against; nullptr if there is none or the
   // scan is its own.
