@@ -66,11 +66,11 @@ struct RbpfSlamStats {
   int64_t skipped_fast_turn = 0;        // scans not used: odometry turning > max_turn_rate
   int64_t matched_between_updates = 0;  // scans between updates matched alone (their pose)
   int64_t scans_refined = 0;            // scan poses refined by ICP against their keyframe
+                                        //     (refine_scans_with_icp)
   int64_t turn_searches = 0;            // scans in or just after a fast turn that the
                                         //     refinement could not place, searched against
                                         //     their keyframe (turn_search)
   int64_t turn_scans_placed = 0;        // ... and placed by the search and ICP
-                                        //     (refine_scans_with_icp)
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates that fell back to odometry
