@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <lcm/lcm-cpp.hpp>
 
 #include "bot_core/planar_lidar_t.hpp"
@@ -56,6 +57,40 @@ TEST(LcmInterface, MalformedMessageIsCountedNotDelivered) {
   }
   EXPECT_EQ(delivered, 0);
   EXPECT_EQ(lcm->decode_errors(), 2);
+}
+
+// A decoded message with a NaN, infinite or absurd real field (message_checks.hpp) is counted
+// and dropped before any handler; so the status carries lcm_invalid_values. A laser's beam
+// without a return (an inf range) is not such a value.
+TEST(LcmInterface, MessagesWithBadValuesAreCountedNotDelivered) {
+  auto lcm = MakeLcm("memq://");
+  std::vector<int64_t> got;
+  lcm->Subscribe<fusionloc::wheel_odometry_t>(
+      "ODOMETRY",
+      [&](const fusionloc::wheel_odometry_t& m, const std::string&) { got.push_back(m.utime); });
+  lcm->Subscribe<bot_core::planar_lidar_t>(
+      "LASER", [&](const bot_core::planar_lidar_t& m, const std::string&) { got.push_back(m.utime); });
+  fusionloc::wheel_odometry_t odo{};
+  odo.utime = 1;
+  lcm->Publish("ODOMETRY", odo);
+  odo.utime = 2;
+  odo.right_ticks = std::numeric_limits<double>::quiet_NaN();
+  lcm->Publish("ODOMETRY", odo);
+  odo.utime = 3;
+  odo.right_ticks = 0.0;
+  odo.theta = 1e30;
+  lcm->Publish("ODOMETRY", odo);
+  bot_core::planar_lidar_t scan = MakeScan(4, 10);
+  scan.ranges[3] = std::numeric_limits<float>::infinity();
+  lcm->Publish("LASER", scan);
+  scan = MakeScan(5, 10);
+  scan.rad0 = std::numeric_limits<float>::quiet_NaN();
+  lcm->Publish("LASER", scan);
+  while (lcm->HandleSubscriptions(0) > 0) {
+  }
+  EXPECT_EQ(got, (std::vector<int64_t>{1, 4}));
+  EXPECT_EQ(lcm->invalid_values(), 3);
+  EXPECT_EQ(lcm->decode_errors(), 0);
 }
 
 // On a data-stream subscription (Duplicates::kDrop) a repeated message (the same bytes) is

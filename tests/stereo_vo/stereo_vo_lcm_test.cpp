@@ -270,7 +270,8 @@ VoProcessRun RunStereoVoOnLog(const std::string& bin, const fl::test::TempDir& d
 }
 
 // use_odometry_prior: ODOMETRY reaches the VO as its motion prior (every tracked frame after
-// the first is predicted by it); a non-finite sample is dropped and counted.
+// the first is predicted by it); a non-finite sample is dropped and counted (by the LCM layer,
+// lcm_invalid_values).
 TEST(StereoVoLcm, ProcessUsesTheOdometryPrior) {
   const std::string bin = fl::test::BinDir() + "/fl-stereo-vo";
   if (!std::filesystem::exists(bin)) GTEST_SKIP() << "build fl-stereo-vo first: " << bin;
@@ -288,7 +289,7 @@ TEST(StereoVoLcm, ProcessUsesTheOdometryPrior) {
   // Frames 1..9 are tracked and predicted, but frame 5: when it arrives the odometry ends at
   // frame 4's time (the odometry is interpolated, never extrapolated).
   EXPECT_EQ(StatusValue(run.last_status, "odometry_prior_frames"), 8);
-  EXPECT_EQ(run.last_status.messages_dropped, 1);  // the NaN sample
+  EXPECT_EQ(StatusValue(run.last_status, "lcm_invalid_values"), 1);  // the NaN sample
 }
 
 // local_ba through the process: a keyframe every 10 cm over a textured plane, each adjusted

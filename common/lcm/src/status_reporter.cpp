@@ -75,6 +75,9 @@ void StatusReporter::Tick(bool force) {
   if (lcm_->duplicates_dropped() > 0) {
     values_["lcm_duplicates_dropped"] = static_cast<double>(lcm_->duplicates_dropped());
   }
+  if (lcm_->invalid_values() > 0) {
+    values_["lcm_invalid_values"] = static_cast<double>(lcm_->invalid_values());
+  }
   if (lcm_->decode_errors() > 0) {
     values_["lcm_decode_errors"] = static_cast<double>(lcm_->decode_errors());
   }

@@ -11,7 +11,8 @@
 //
 // Typed subscriptions decode each message; a message that fails to decode (wrong type,
 // truncated) is counted, reported with a rate-limited warning naming the channel and type,
-// and never reaches the handler. A subscription to a data stream (Duplicates::kDrop) also drops
+// and never reaches the handler. So is a decoded message with a NaN, infinite or absurd real
+// field (message_checks.hpp: BadField for the input types). A subscription to a data stream (Duplicates::kDrop) also drops
 // a message byte-for-byte identical to one of the last few of its channel (a duplicate from
 // the network or a relay: sensor data and estimates carry their own time stamps, so two real
 // ones never match), counted the same way. Commands and orders keep the default (kDeliver): a
@@ -24,12 +25,22 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/message_checks.hpp"
 #include "fusionloc/common/time.hpp"
 
 namespace fl {
+
+// Whether message_checks.hpp has a BadField for Msg.
+template <class Msg, class = void>
+struct HasBadField : std::false_type {};
+template <class Msg>
+struct HasBadField<Msg, std::void_t<decltype(BadField(std::declval<const Msg&>()))>>
+    : std::true_type {};
 
 // Default live URL: loopback-only multicast (ttl=0) with a receive buffer large enough for
 // full-resolution stereo pairs.
@@ -91,6 +102,7 @@ class LcmInterface {
   int64_t messages_received() const { return received_; }
   int64_t decode_errors() const { return decode_warning_.count(); }
   int64_t duplicates_dropped() const { return duplicate_warning_.count(); }
+  int64_t invalid_values() const { return invalid_warning_.count(); }
 
   // Encodes and publishes an lcm-gen message. `utime` (the time stamp written to logs)
   // defaults to Now().
@@ -125,6 +137,14 @@ class LcmInterface {
                              "uses the same lcmtypes");
         return;
       }
+      if constexpr (HasBadField<Msg>::value) {
+        const std::string bad = BadField(msg);
+        if (!bad.empty()) {
+          invalid_warning_.Warn("channel '" + channel + "': a " + Msg::getTypeName() +
+                                " with " + bad + " dropped (the sender is broken)");
+          return;
+        }
+      }
       handler(msg, channel);
     });
   }
@@ -140,6 +160,7 @@ class LcmInterface {
   std::vector<uint8_t> buffer_;
   RateLimitedWarning decode_warning_;
   RateLimitedWarning duplicate_warning_;
+  RateLimitedWarning invalid_warning_;
   int64_t published_ = 0;
   int64_t received_ = 0;
   Utime last_message_utime_ = 0;
