@@ -69,7 +69,8 @@ TEST(LcmInterface, MessagesWithBadValuesAreCountedNotDelivered) {
       "ODOMETRY",
       [&](const fusionloc::wheel_odometry_t& m, const std::string&) { got.push_back(m.utime); });
   lcm->Subscribe<bot_core::planar_lidar_t>(
-      "LASER", [&](const bot_core::planar_lidar_t& m, const std::string&) { got.push_back(m.utime); });
+      "LASER",
+      [&](const bot_core::planar_lidar_t& m, const std::string&) { got.push_back(m.utime); });
   fusionloc::wheel_odometry_t odo{};
   odo.utime = 1;
   lcm->Publish("ODOMETRY", odo);

@@ -70,7 +70,8 @@ TEST(MessageChecks, LaserBeamsWithoutAReturnAreNotErrors) {
   bot_core::planar_lidar_t scan{};
   scan.rad0 = -1.0f;
   scan.radstep = 0.01f;
-  scan.ranges = {1.0f, static_cast<float>(kInf), static_cast<float>(kNan), static_cast<float>(-kInf)};
+  scan.ranges = {1.0f, static_cast<float>(kInf), static_cast<float>(kNan),
+                 static_cast<float>(-kInf)};
   scan.intensities = {static_cast<float>(kNan)};
   EXPECT_EQ(BadField(scan), "");
 }

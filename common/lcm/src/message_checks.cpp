@@ -16,7 +16,9 @@ std::string Text(const std::string& name, double v) {
   return name + buf;
 }
 
-std::string Indexed(const char* name, size_t i) { return std::string(name) + "[" + std::to_string(i) + "]"; }
+std::string Indexed(const std::string& name, size_t i) {
+  return name + "[" + std::to_string(i) + "]";
+}
 
 // Collects the first bad field in order of the calls.
 class FirstBad {
@@ -95,7 +97,7 @@ std::string BadField(const fusionloc::relative_pose_factor_t& m) {
 std::string BadField(const fusionloc::point_cloud_t& m) {
   for (size_t i = 0; i < m.points.size(); ++i) {
     for (size_t k = 0; k < m.points[i].size(); ++k) {
-      if (Bad(m.points[i][k])) return Text(Indexed("points", i) + "[" + std::to_string(k) + "]", m.points[i][k]);
+      if (Bad(m.points[i][k])) return Text(Indexed(Indexed("points", i), k), m.points[i][k]);
     }
   }
   return FirstBad().Vector("intensities", m.intensities).result();

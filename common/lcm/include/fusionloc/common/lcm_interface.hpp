@@ -12,10 +12,10 @@
 // Typed subscriptions decode each message; a message that fails to decode (wrong type,
 // truncated) is counted, reported with a rate-limited warning naming the channel and type,
 // and never reaches the handler. So is a decoded message with a NaN, infinite or absurd real
-// field (message_checks.hpp: BadField for the input types). A subscription to a data stream (Duplicates::kDrop) also drops
-// a message byte-for-byte identical to one of the last few of its channel (a duplicate from
-// the network or a relay: sensor data and estimates carry their own time stamps, so two real
-// ones never match), counted the same way. Commands and orders keep the default (kDeliver): a
+// field (message_checks.hpp: BadField for the input types). A subscription to a data stream
+// (Duplicates::kDrop) also drops a message byte-for-byte identical to one of the last few of
+// its channel (a duplicate from the network or a relay: sensor data and estimates carry their
+// own time stamps, so two real ones never match), counted the same way. Commands and orders keep the default (kDeliver): a
 // repeated command is meant, and a replayed order must reach the code that refuses and logs it.
 #pragma once
 
