@@ -187,7 +187,11 @@ TEST(ProcmanSimDemo, KillMinus9OfEachEstimatorAndOfTheFusionKeepsTheFusedAccurac
   const double hit_ate = FusedAte(hit);
   std::cout << "fused ATE: undisturbed " << calm_ate << " m, estimators and fusion killed "
             << hit_ate << " m (" << hit_ate / calm_ate << "x)\n";
-  EXPECT_LE(hit_ate, 1.5 * calm_ate) << ReadFile(hit.file("fusion.log"));
+  // Issue 27's bound for lost data (bench faults: <= 2x the undisturbed run). Three kills cost
+  // 1.09-1.25x when the undisturbed run was 0.05 m; since the RBPF publishes its noisy-scan
+  // factors it is 0.036 m, and on a loaded machine (the whole suite on two cores) the same kills
+  // cost up to 1.76x (0.063 m).
+  EXPECT_LE(hit_ate, 2.0 * calm_ate) << ReadFile(hit.file("fusion.log"));
   const std::string fusion_log = ReadFile(hit.file("fusion.log"));
   EXPECT_NE(fusion_log.find("restored from the journal"), std::string::npos) << fusion_log;
   const std::string rbpf_log = ReadFile(hit.file("rbpf_slam.log"));
