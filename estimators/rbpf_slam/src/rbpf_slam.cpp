@@ -257,7 +257,7 @@ bool RbpfSlam::SearchAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
   const fl::Pose2& T_world_kf = graph_.pose(anchor_.keyframe);
   const CorrelativeResult cr = CorrelativeMatch(
       keyframe->points_base, hits_base_, T_world_kf.between(*T_world_base), opt_.turn_search);
-  if (!cr.ok || cr.at_window_edge || cr.score < opt_.turn_search.min_score) return false;
+  if (!Usable(cr, opt_.turn_search)) return false;
   const IcpResult icp =
       AlignPointToLine(keyframe->normals_base, hits_base_, cr.T_ref_query, opt_.icp);
   if (!icp.ok || icp.degenerate_dims > 0) return false;
@@ -621,18 +621,18 @@ bool RbpfSlam::SearchLostTrack(int i, int j, const fl::Pose2& pose, const fl::Po
   } else {
     // Around the filter's relative pose and, where the odometry's differs, around that too
     // (the filter may have been pulled away from a right odometry step); the better score wins.
-    auto usable = [&](const CorrelativeResult& r) {
-      return r.ok && !r.at_window_edge && r.score >= g.recovery_search.min_score;
-    };
     const fl::Pose2 filter_rel = T_world_i.between(pose);
     CorrelativeResult cr = CorrelativeMatch(keyframes_[i].points_base, keyframes_[j].points_base,
                                             filter_rel, g.recovery_search);
     if (g.recovery_search_from_odometry && Beyond(filter_rel.between(odom_rel), 0.05, 0.03)) {
       const CorrelativeResult from_odom = CorrelativeMatch(
           keyframes_[i].points_base, keyframes_[j].points_base, odom_rel, g.recovery_search);
-      if (usable(from_odom) && (!usable(cr) || from_odom.score > cr.score)) cr = from_odom;
+      if (Usable(from_odom, g.recovery_search) &&
+          (!Usable(cr, g.recovery_search) || from_odom.score > cr.score)) {
+        cr = from_odom;
+      }
     }
-    if (!usable(cr)) return false;
+    if (!Usable(cr, g.recovery_search)) return false;
     start = T_world_i * cr.T_ref_query;
   }
   const MatchResult mr = MatchScan(map_before_scan, match_base_, start, opt_.matcher);
@@ -809,7 +809,7 @@ bool RbpfSlam::VerifyLoopClosure(int cand, int j, IcpResult* icp) {
   for (size_t i = 0; i < ref.size(); ++i) ref_points[i] = ref[i].p;
   const CorrelativeResult cr =
       CorrelativeMatch(ref_points, keyframes_[j].points_base, prior, g.loop_search);
-  if (!cr.ok || cr.score < g.loop_search.min_score || cr.at_window_edge) return false;
+  if (!Usable(cr, g.loop_search)) return false;
   io.max_correspondence_m = opt_.icp.max_correspondence_m;
   *icp = AlignPointToLine(ref, keyframes_[j].points_base, cr.T_ref_query, io);
   return icp->ok;

@@ -33,6 +33,12 @@ struct CorrelativeResult {
                                 // may lie outside, so the match is not trustworthy
 };
 
+// Whether a search result can be used: a pose was found, not on the window's border, with a
+// score of at least options.min_score.
+inline bool Usable(const CorrelativeResult& r, const CorrelativeOptions& options) {
+  return r.ok && !r.at_window_edge && r.score >= options.min_score;
+}
+
 // Best pose of `query` (points in its own frame) against `reference` (points in the reference
 // frame) within the window around `initial`.
 CorrelativeResult CorrelativeMatch(const std::vector<Eigen::Vector2d>& reference,
