@@ -272,6 +272,42 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
   return Status::Ok();
 }
 
+Status FactorGraphFusion::PlaceLateLaserPose(Utime utime, const Pose2& T_map_base,
+                                             TrajectoryPoint* out) {
+  const std::string what = "late laser pose at " + TimeText(utime);
+  if (!Finite(T_map_base)) {
+    return Reject(&counters_.rejected_non_finite, what + " has NaN/Inf; dropped");
+  }
+  if (nodes_.empty() || utime > nodes_.back().utime) {
+    return Reject(&counters_.rejected_node_time,
+                  what + " is not older than the newest node; it gets a node (AddLaserPose)");
+  }
+  const int b = TimelineLowerBound(utime);  // first timeline entry at or after utime
+  if ((b < TimelineSize() && TimelineUtime(b) == utime) || late_placed_.count(utime) > 0) {
+    return Reject(&counters_.rejected_node_time,
+                  what +
+                      ": a pose with this stamp was taken already (a repeated message); "
+                      "dropped");
+  }
+  const int n =
+      b == 0 || (b < TimelineSize() && TimelineUtime(b) - utime < utime - TimelineUtime(b - 1))
+          ? b
+          : b - 1;
+  const Utime tol = SecondsToUtime(options_.attach_max_gap_s);
+  if (n >= TimelineSize() || std::llabs(utime - TimelineUtime(n)) > tol) {
+    return Reject(&counters_.rejected_node_time, what + ": no node within " +
+                                                     FormatDouble(options_.attach_max_gap_s) +
+                                                     " s of it to place it on; dropped");
+  }
+  const Pose2 T_map_t_rbpf(T_map_base.x, T_map_base.y, WrapAngle(T_map_base.theta));
+  out->utime = utime;
+  out->T_map_base = TimelinePose(n) * TimelineRbpf(n).between(T_map_t_rbpf);
+  late_placed_.insert(utime);
+  if (late_placed_.size() > kMaxLatePlacedStamps) late_placed_.erase(late_placed_.begin());
+  ++counters_.late_laser_poses_placed;
+  return Status::Ok();
+}
+
 Status FactorGraphFusion::AddFactor(const RelativePoseFactor& f) {
   const std::string what = std::string(FactorSourceName(f.source)) + " factor " +
                            TimeText(f.utime_i) + " -> " + TimeText(f.utime_j);
@@ -321,6 +357,11 @@ int FactorGraphFusion::TimelineSize() const {
 Utime FactorGraphFusion::TimelineUtime(int k) const {
   const int r = static_cast<int>(retired_.size());
   return k < r ? retired_[k].utime : nodes_[num_fixed_ + k - r].utime;
+}
+
+Pose2 FactorGraphFusion::TimelinePose(int k) const {
+  const int r = static_cast<int>(retired_.size());
+  return k < r ? retired_[k].T_map_base : ToPose2(nodes_[num_fixed_ + k - r].state);
 }
 
 const Pose2& FactorGraphFusion::TimelineRbpf(int k) const {
@@ -488,11 +529,25 @@ Status FactorGraphFusion::AddOdometry(Utime utime, const Pose2& T_odom_base) {
     return Status::Error(m);
   }
   if (!odometry_.empty() && utime <= odometry_.back().utime) {
-    ++counters_.rejected_odometry;
-    const std::string m = "odometry at " + TimeText(utime) + " is not newer than the last (" +
-                          TimeText(odometry_.back().utime) + "); dropped";
-    warnings_->odometry.Warn(m);
-    return Status::Error(m);
+    // Late: inserted by its stamp between the kept samples around it.
+    const auto at =
+        std::lower_bound(odometry_.begin(), odometry_.end(), utime,
+                         [](const OdomSample& s, Utime time) { return s.utime < time; });
+    if (at->utime == utime || at == odometry_.begin()) {
+      ++counters_.rejected_odometry;
+      const std::string m =
+          "odometry at " + TimeText(utime) +
+          (at->utime == utime
+               ? " repeats a sample's stamp; dropped"
+               : " is older than every kept sample (" + TimeText(odometry_.front().utime) +
+                     ": the node pairs it could serve are done); dropped");
+      warnings_->odometry.Warn(m);
+      return Status::Error(m);
+    }
+    odometry_.insert(at, {utime, T_odom_base});
+    ++counters_.late_odometry_placed;
+    AddOdometryFactors();
+    return Status::Ok();
   }
   odometry_.push_back({utime, T_odom_base});
   AddOdometryFactors();
@@ -763,11 +818,8 @@ bool FactorGraphFusion::Latest(TrajectoryPoint* out) const {
 bool FactorGraphFusion::PoseAt(Utime t, Pose2* T_map_base) const {
   if (nodes_.empty()) return false;
   // The trajectory: the retired nodes (frozen), then the active nodes.
-  const int r = static_cast<int>(retired_.size());
   auto utime = [&](int k) { return TimelineUtime(k); };
-  auto pose = [&](int k) {
-    return k < r ? retired_[k].T_map_base : ToPose2(nodes_[num_fixed_ + k - r].state);
-  };
+  auto pose = [&](int k) { return TimelinePose(k); };
   if (t < utime(0) || t > utime(TimelineSize() - 1)) return false;
   const int lo = TimelineLowerBound(t);
   if (utime(lo) == t) {
@@ -786,7 +838,8 @@ std::vector<TrajectoryPoint> FactorGraphFusion::Trajectory(Utime from) const {
                        [](const RetiredNode& d, Utime t) { return d.utime < t; });
   std::vector<TrajectoryPoint> out;
   out.reserve(static_cast<size_t>(retired_.end() - first_retired) + nodes_.size());
-  for (auto it = first_retired; it != retired_.end(); ++it) out.push_back({it->utime, it->T_map_base});
+  for (auto it = first_retired; it != retired_.end(); ++it)
+    out.push_back({it->utime, it->T_map_base});
   for (int k = num_fixed_; k < num_nodes(); ++k) {
     if (nodes_[k].utime >= from) out.push_back({nodes_[k].utime, ToPose2(nodes_[k].state)});
   }

@@ -316,7 +316,8 @@ TEST(FusionFactorGraph, WheelOdometryFactorsLinkNodes) {
       ASSERT_TRUE(fusion.AddLaserPose(d.rbpf[node].utime, d.rbpf[node].T_map_base).ok());
       ++node;
     }
-    const Pose2 truth = fl::test::RoundedSquarePose(so, UtimeToSeconds(t - so.start_utime));
+    const Pose2 truth =
+        fl::test::RoundedSquarePose(so, so.speed_mps * UtimeToSeconds(t - so.start_utime));
     ASSERT_TRUE(fusion.AddOdometry(t, T_odom_map * truth).ok());
   }
   EXPECT_EQ(fusion.counters().odometry_gaps, 0);
@@ -327,6 +328,107 @@ TEST(FusionFactorGraph, WheelOdometryFactorsLinkNodes) {
   // Out-of-order odometry is rejected.
   EXPECT_FALSE(fusion.AddOdometry(so.start_utime, Pose2()).ok());
   EXPECT_EQ(fusion.counters().rejected_odometry, 1);
+}
+
+// Odometry delayed by the network arrives after newer samples: inserted by its stamp, it is
+// used by the node pair it falls in as if it had come in order; a repeated stamp, or one older
+// than every kept sample, is rejected and counted.
+TEST(FusionFactorGraph, LateOdometryIsInsertedByItsStamp) {
+  FusionOptions o = TestOptions();
+  o.use_wheel_odometry = true;
+  const Utime t0 = 1000000;
+  // Odometry samples around two laser nodes at t0 and t0 + 0.1 s; the one at t0 + 0.02 s is the
+  // late one. It is not on a straight line with its neighbours: the node's interpolated
+  // odometry depends on it.
+  const std::vector<std::pair<Utime, Pose2>> samples = {{t0 - 10000, Pose2(-0.01, 0.0, 0.0)},
+                                                        {t0 + 20000, Pose2(0.05, 0.01, 0.02)},
+                                                        {t0 + 30000, Pose2(0.03, 0.0, 0.0)},
+                                                        {t0 + 110000, Pose2(0.11, 0.0, 0.0)}};
+  auto run = [&](const std::vector<int>& order, FusionCounters* counters) {
+    FactorGraphFusion fusion(o);
+    EXPECT_TRUE(fusion.AddLaserPose(t0, Pose2()).ok());
+    for (int k : order) {
+      if (k == 3) {
+        EXPECT_TRUE(fusion.AddLaserPose(t0 + 100000, Pose2(0.1, 0.0, 0.0)).ok());
+      }
+      EXPECT_TRUE(fusion.AddOdometry(samples[k].first, samples[k].second).ok()) << k;
+    }
+    fusion.FullSolve();
+    *counters = fusion.counters();
+    return fusion.Trajectory();
+  };
+  FusionCounters in_order_c, late_c, missing_c;
+  const auto in_order = run({0, 1, 2, 3}, &in_order_c);
+  const auto late = run({0, 2, 1, 3}, &late_c);
+  const auto missing = run({0, 2, 3}, &missing_c);
+  EXPECT_EQ(in_order_c.late_odometry_placed, 0);
+  EXPECT_EQ(late_c.late_odometry_placed, 1);
+  EXPECT_EQ(late_c.rejected_odometry, 0);
+  EXPECT_EQ(late_c.odometry_factors, 1);
+  ASSERT_EQ(late.size(), 2u);
+  EXPECT_EQ(late[1].T_map_base.x, in_order[1].T_map_base.x);
+  EXPECT_EQ(late[1].T_map_base.y, in_order[1].T_map_base.y);
+  EXPECT_EQ(late[1].T_map_base.theta, in_order[1].T_map_base.theta);
+  EXPECT_GT(PositionError(missing[1].T_map_base, in_order[1].T_map_base), 1e-3);  // it counts
+
+  FactorGraphFusion fusion(o);
+  ASSERT_TRUE(fusion.AddLaserPose(t0, Pose2()).ok());
+  for (int k : {0, 2}) ASSERT_TRUE(fusion.AddOdometry(samples[k].first, samples[k].second).ok());
+  EXPECT_FALSE(fusion.AddOdometry(samples[2].first, samples[2].second).ok());  // a repeat
+  EXPECT_FALSE(fusion.AddOdometry(t0 - 20000, Pose2()).ok());  // before every kept sample
+  EXPECT_EQ(fusion.counters().rejected_odometry, 2);
+  EXPECT_EQ(fusion.counters().late_odometry_placed, 0);
+}
+
+// A laser pose that arrives after newer ones adds no node (the nodes are a chain in time order)
+// but gets its fused pose: the nearest node's, carried by the RBPF's own motion to its stamp.
+TEST(FusionFactorGraph, LateLaserPosesArePlacedByTheirStampsWithoutANode) {
+  FusionSimOptions so;
+  so.vision_offset_s = 0.0;  // exact factors on the node times: the nodes converge to the truth
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FactorGraphFusion fusion(TestOptions());
+  RunInOrder(d, &fusion);
+  fusion.FullSolve();
+  const int nodes = fusion.num_nodes(), factors = fusion.num_factors();
+  int placed = 0;
+  std::vector<double> heading_errors;
+  for (size_t k = 3; k + 1 < d.rbpf.size(); k += 7) {
+    // Between two nodes: the RBPF's pose there (its drift is far off the truth).
+    const Utime t = (d.rbpf[k].utime + d.rbpf[k + 1].utime) / 2;
+    const Pose2 rbpf = Interpolate(d.rbpf[k].T_map_base, d.rbpf[k + 1].T_map_base, 0.5);
+    const Pose2 truth =
+        fl::test::RoundedSquarePose(so, so.speed_mps * UtimeToSeconds(t - so.start_utime));
+    TrajectoryPoint p;
+    ASSERT_TRUE(fusion.PlaceLateLaserPose(t, rbpf, &p).ok()) << k;
+    ++placed;
+    EXPECT_EQ(p.utime, t);
+    EXPECT_LT(PositionError(p.T_map_base, truth), 2e-3) << k;
+    // The RBPF's heading bias over the half step from the node, 0.002 rad; up to 0.02 rad where
+    // the half step enters or leaves a corner's arc (its interpolated motion is an arc).
+    const double heading_error = std::fabs(WrapAngle(p.T_map_base.theta - truth.theta));
+    EXPECT_LT(heading_error, 0.025) << k;
+    heading_errors.push_back(heading_error);
+    if (k > 40) {
+      EXPECT_GT(PositionError(rbpf, truth), 0.1) << k;  // the RBPF's own is far off
+    }
+  }
+  std::nth_element(heading_errors.begin(), heading_errors.begin() + heading_errors.size() / 2,
+                   heading_errors.end());
+  EXPECT_LT(heading_errors[heading_errors.size() / 2], 2.5e-3);
+  EXPECT_EQ(fusion.counters().late_laser_poses_placed, placed);
+  EXPECT_EQ(fusion.num_nodes(), nodes);  // no node, no factor
+  EXPECT_EQ(fusion.num_factors(), factors);
+  // A repeated stamp is not placed twice; a stamp far from every node is not placed at all.
+  const int64_t rejected = fusion.counters().rejected_node_time;
+  TrajectoryPoint p;
+  EXPECT_FALSE(fusion.PlaceLateLaserPose(d.rbpf[10].utime, d.rbpf[10].T_map_base, &p).ok());
+  EXPECT_FALSE(
+      fusion.PlaceLateLaserPose(d.rbpf[0].utime - SecondsToUtime(5.0), d.rbpf[0].T_map_base, &p)
+          .ok());
+  EXPECT_FALSE(fusion.PlaceLateLaserPose(d.rbpf.back().utime + 1, d.rbpf.back().T_map_base, &p)
+                   .ok());  // newer than the newest node: that is AddLaserPose's
+  EXPECT_EQ(fusion.counters().rejected_node_time, rejected + 3);
+  EXPECT_EQ(fusion.counters().late_laser_poses_placed, placed);
 }
 
 // A corridor: the laser is degenerate along the axis, the RBPF slides (its poses advance 20 %

@@ -45,7 +45,8 @@ struct FusionRun {
 // odometry and the drifting RBPF poses. With `finish` the node finishes (a clean stop);
 // without, it is destroyed as a kill -9 would leave it (the journal is flushed per input).
 // `offset` [us] shifts every time (another run).
-FusionRun RunFusion(const std::string& journal, int first, int last, bool finish, Utime offset = 0) {
+FusionRun RunFusion(const std::string& journal, int first, int last, bool finish,
+                    Utime offset = 0) {
   auto lcm = MakeLcm("memq://");
   FusionRun run;
   lcm->Subscribe<fusionloc::fused_pose_t>(
@@ -222,6 +223,40 @@ TEST(FusionNodeInput, TimeStampsOutOfRangeAreDroppedAndCounted) {
   ASSERT_EQ(f.fused.size(), 1u);
   EXPECT_NEAR(f.fused[0].x, 1.0, 1e-9);
   EXPECT_EQ(f.node->status().dropped(), 3);
+}
+
+// An RBPF_POSE that the network delivers after newer ones gets its FUSED_POSE, at its own stamp
+// (placed on the nearest node; no node added); a repeated one gets none.
+TEST(FusionNodeInput, ALateLaserPoseGetsItsFusedPoseAtItsStamp) {
+  LiveFusion f;
+  for (int k = 0; k < 12; ++k) {
+    if (k == 5) continue;  // delayed
+    fusionloc::wheel_odometry_t odo{};
+    odo.utime = StepTime(k, 0);
+    odo.x = TruePose(k).x;
+    odo.y = TruePose(k).y;
+    odo.theta = TruePose(k).theta;
+    f.Send(channels::kOdometry, odo);
+    f.Send(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)));
+  }
+  ASSERT_EQ(f.fused.size(), 11u);
+  const int64_t dropped = f.node->status().dropped();
+  f.Send(channels::kRbpfPose, RbpfPoseMessage(StepTime(5, 0), RbpfPose(5)));  // 0.6 s late
+  ASSERT_EQ(f.fused.size(), 12u);
+  const fusionloc::fused_pose_t& late = f.fused.back();
+  EXPECT_EQ(late.utime, StepTime(5, 0));
+  // On the fused node one step away, through the RBPF's motion over that step (whose drift,
+  // 0.011 m per step, it keeps); not the RBPF's own pose, 5 steps of drift away.
+  EXPECT_LT(Distance(late, TruePose(5)), 0.015);
+  EXPECT_GT(Distance(late, RbpfPose(5)), 0.04);
+  EXPECT_EQ(late.num_nodes, 11);
+  EXPECT_EQ(f.node->status().dropped(), dropped);
+  // Stamps sent again with other content (repeats the LCM layer does not see as identical): the
+  // late one already placed and one with a node get no second fused pose.
+  f.Send(channels::kRbpfPose, RbpfPoseMessage(StepTime(5, 0), RbpfPose(5) * Pose2(0.01, 0, 0)));
+  f.Send(channels::kRbpfPose, RbpfPoseMessage(StepTime(7, 0), RbpfPose(7) * Pose2(0.01, 0, 0)));
+  EXPECT_EQ(f.fused.size(), 12u);
+  EXPECT_EQ(f.node->status().dropped(), dropped + 2);
 }
 
 // With a bounded graph, FUSED_TRAJECTORY carries the active window and trajectory_overlap_s of

@@ -321,6 +321,19 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     }
   }
   const Eigen::Isometry3d T = IsometryFromArrays(m.pos, m.orientation);
+  if (fusion_.num_nodes() > 0 && m.utime <= fusion_.newest_node_utime()) {
+    // Late (the network delayed or reordered it): placed by its stamp, no node.
+    TrajectoryPoint late;
+    const Status placed = fusion_.PlaceLateLaserPose(m.utime, Pose2::FromIsometry3(T), &late);
+    if (!placed.ok()) {
+      status_.CountDropped(placed.message());
+      return;
+    }
+    status_.Set("late_laser_poses_placed",
+                static_cast<double>(fusion_.counters().late_laser_poses_placed));
+    if (!restoring_) PublishPose(late);
+    return;
+  }
   const Status s = fusion_.AddLaserPose(m.utime, Pose2::FromIsometry3(T));
   if (!s.ok()) {
     status_.CountDropped(s.message());
@@ -423,7 +436,10 @@ void FusionNode::OnPoints(const fusionloc::point_cloud_t& m) {
 
 void FusionNode::PublishPose() {
   TrajectoryPoint p;
-  if (!fusion_.Latest(&p)) return;
+  if (fusion_.Latest(&p)) PublishPose(p);
+}
+
+void FusionNode::PublishPose(const TrajectoryPoint& p) {
   fusionloc::fused_pose_t msg;
   msg.utime = p.utime;
   msg.x = p.T_map_base.x;

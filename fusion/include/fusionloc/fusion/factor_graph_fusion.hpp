@@ -20,6 +20,15 @@
 // producers (laser) fill only rows/cols 0, 1, 5 (the rest zero): that 3x3 block is used
 // directly.
 //
+// LATE LASER POSES: nodes are a chain in time order, so a laser pose that arrives after a newer
+// one (late or reordered by the network) adds no node. PlaceLateLaserPose() places it by its
+// stamp instead: on the timeline entry (active or retired node) nearest to it, within
+// attach_max_gap_s, through the RBPF's own motion between the two,
+//     T_map_t = T_map_n * T_rbpf(n)^-1 * T_rbpf(t),
+// so that the scan still gets its fused pose. A stamp that already has a node or was placed
+// (a repeated message) is rejected and counted, never placed twice. Late odometry is inserted in
+// time order while the samples around it are still kept (AddOdometry).
+//
 // ASYNCHRONOUS SENSORS / TIME ATTACHMENT: nodes exist at laser times (10 Hz); a factor's
 // times utime_i, utime_j (e.g. 2 Hz vision keyframes) are attached to the NEAREST node if it
 // is within attach_tolerance_s, or, when laser scans were lost, to the nearer of the two nodes
@@ -99,6 +108,7 @@
 #include <deque>
 #include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -224,7 +234,10 @@ struct FusionCounters {
   int64_t rejected_no_node = 0;          // a factor time matches no node
   int64_t rejected_same_node = 0;        // both factor times on one node
   int64_t dropped_pending_overflow = 0;  // pending factors dropped (max_pending_factors)
-  int64_t rejected_odometry = 0;         // odometry sample out of order / non-finite
+  int64_t rejected_odometry = 0;         // odometry sample too old, repeated or non-finite
+  int64_t late_laser_poses_placed = 0;   // laser poses older than the newest node, placed by
+                                         //   their stamp (PlaceLateLaserPose), no node added
+  int64_t late_odometry_placed = 0;      // odometry samples inserted before newer ones
   int64_t odometry_gaps = 0;             // node pairs without odometry coverage
   int64_t odometry_factors = 0;          // wheel-odometry between-factors added
   int64_t chain_factors = 0;             // RBPF pose-chain factors added
@@ -280,10 +293,18 @@ class FactorGraphFusion {
   // increase; the pose initialises the node (relative to the previous fused node) and
   // interpolates factor times. Returns an error (counted, graph unchanged) if rejected.
   Status AddLaserPose(Utime utime, const Pose2& T_map_base);
+  // A laser pose not newer than the newest node (late on the network): no node; its fused pose
+  // is placed by its stamp on the nearest node (see LATE LASER POSES above) into *out. Error
+  // (counted as rejected_node_time, nothing changes) if that stamp has a node or was placed, if
+  // the nearest node is more than attach_max_gap_s away or the stamp is before the first node.
+  Status PlaceLateLaserPose(Utime utime, const Pose2& T_map_base, TrajectoryPoint* out);
+  // Stamp of the newest node (0 if none): a laser pose at or before it is late.
+  Utime newest_node_utime() const { return nodes_.empty() ? 0 : nodes_.back().utime; }
   // A relative-pose factor; attached to nodes by its times (see the file comment). OK also
   // when the factor waits for its laser node (pending).
   Status AddFactor(const RelativePoseFactor& factor);
-  // An integrated wheel-odometry pose T_odom_base at utime (times must increase).
+  // An integrated wheel-odometry pose T_odom_base at utime. One older than the newest sample is
+  // inserted in time order if the samples around it are still kept (else rejected, counted).
   Status AddOdometry(Utime utime, const Pose2& T_odom_base);
 
   // Incremental update of the window; cheap. Returns what it did.
@@ -376,6 +397,7 @@ class FactorGraphFusion {
   // The input poses in time order: the retired nodes, then the active nodes.
   int TimelineSize() const;
   Utime TimelineUtime(int k) const;
+  Pose2 TimelinePose(int k) const;  // fused pose of timeline entry k (frozen if retired)
   const Pose2& TimelineRbpf(int k) const;
   // The first timeline entry at or after t (TimelineSize() if none).
   int TimelineLowerBound(Utime t) const;
@@ -387,6 +409,9 @@ class FactorGraphFusion {
   std::vector<Factor> factors_;
   std::deque<PendingFactor> pending_;
   std::deque<OdomSample> odometry_;
+  // Stamps of the newest late laser poses placed (PlaceLateLaserPose): a repeat is refused.
+  static constexpr size_t kMaxLatePlacedStamps = 4096;
+  std::set<Utime> late_placed_;
   int next_odom_pair_ = 1;        // next node j needing an odometry factor (j-1, j)
   int oldest_touched_node_ = -1;  // oldest node touched by factors since last Update
   bool full_solve_requested_ = false;

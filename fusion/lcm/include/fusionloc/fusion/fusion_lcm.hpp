@@ -80,7 +80,9 @@ class FusionNode : public LcmNode {
   void OnFactor(const fusionloc::relative_pose_factor_t& m, const std::string& channel);
   void OnOdometry(const fusionloc::wheel_odometry_t& m);
   void OnPoints(const fusionloc::point_cloud_t& m);
-  void PublishPose();
+  void PublishPose();  // the newest node's
+  // FUSED_POSE of p with the newest node's covariance (a late pose's own is not computed).
+  void PublishPose(const TrajectoryPoint& p);
   // The latest part of the trajectory (FusionConfig::trajectory_overlap_s), or all of it.
   void PublishTrajectory(Utime utime, bool whole = false);
   void StartFullSolve();
@@ -123,8 +125,8 @@ class FusionNode : public LcmNode {
   std::unique_ptr<LcmLogWriter> journal_writer_;
   RateLimitedWarning journal_warning_;  // the journal cannot be written
   bool restoring_ = false;
-  bool restored_ = false;        // the graph came from a journal, no live pose yet
-  Utime restored_until_ = 0;     // data time of the journal's newest node
+  bool restored_ = false;     // the graph came from a journal, no live pose yet
+  Utime restored_until_ = 0;  // data time of the journal's newest node
   std::vector<uint8_t> encode_buffer_;
 };
 
