@@ -3,7 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/channels.hpp"
@@ -179,14 +181,21 @@ TEST(RbpfSlamLcm, FactorAndGridConversions) {
 // wall, with LASER_TO_BASE published after `mounting_after` scans (-1: never). Returns the
 // number of RBPF_POSE after each scan and, through `log`, what the node logged; through
 // `trajectory_sizes` the size of each RBPF_TRAJECTORY.
+// With `late_every` > 0, every late_every-th scan (after the first 10) reaches the node 5 scans
+// (0.5 s) late, beyond the merge window; `pose_stamps` gets the stamp of each RBPF_POSE.
 std::vector<int> RunNode(int steps, int mounting_after, std::string* log,
                          const RbpfSlamNodeOptions& node_options = RbpfSlamNodeOptions(),
-                         std::vector<int>* trajectory_sizes = nullptr) {
+                         std::vector<int>* trajectory_sizes = nullptr, int late_every = 0,
+                         std::vector<Utime>* pose_stamps = nullptr) {
   const test::LaserWorld world = test::LaserWorld::RoomWithBoxes();
   auto lcm = MakeLcm("memq://");
   int poses = 0;
   lcm->Subscribe<bot_core::pose_t>(channels::kRbpfPose,
-                                   [&](const bot_core::pose_t&, const std::string&) { ++poses; });
+                                   [&](const bot_core::pose_t& m, const std::string&) {
+                                     ++poses;
+                                     if (pose_stamps) pose_stamps->push_back(m.utime);
+                                   });
+  std::map<int, bot_core::planar_lidar_t> delayed;  // by the step they arrive at
   std::vector<int> sizes;
   lcm->Subscribe<fusionloc::trajectory_t>(
       channels::kRbpfTrajectory,
@@ -216,7 +225,12 @@ std::vector<int> RunNode(int steps, int mounting_after, std::string* log,
       scan.nranges = static_cast<int32_t>(scan.ranges.size());
       scan.rad0 = static_cast<float>(-M_PI / 2);
       scan.radstep = static_cast<float>(M_PI / 180);
-      lcm->Publish(channels::kLaser, scan, t);
+      if (late_every > 0 && k > 10 && k + 5 < steps && k % late_every == 0) {
+        delayed[k + 5] = scan;
+      } else {
+        lcm->Publish(channels::kLaser, scan, t);
+      }
+      if (delayed.count(k)) lcm->Publish(channels::kLaser, delayed[k], delayed[k].utime);
       while (lcm->HandleSubscriptions(0) > 0) {
       }
       node.Poll();
@@ -269,6 +283,27 @@ TEST(RbpfSlamNode, TheFirstScansWaitForTheMountingAndNoneIsLost) {
   EXPECT_GE(poses[25], 20) << log;
   EXPECT_EQ(poses.back(), 30) << log;
   EXPECT_NE(log.find("identity T_base_laser"), std::string::npos) << log;
+}
+
+// Scans the network delivers 0.5 s late, beyond the 0.3 s merge window, are placed by their
+// stamps: each gets its RBPF_POSE (late), none twice, and the final trajectory has them all.
+TEST(RbpfSlamNode, LateScansBeyondTheMergeWindowGetTheirPoses) {
+  std::string log;
+  RbpfSlamNodeOptions every_scan;
+  every_scan.scan_trajectory = true;
+  std::vector<int> sizes;
+  std::vector<Utime> stamps;
+  const std::vector<int> poses = RunNode(60, 0, &log, every_scan, &sizes, 7, &stamps);
+  EXPECT_EQ(poses.back(), 60) << log;
+  std::vector<Utime> sorted = stamps;
+  std::sort(sorted.begin(), sorted.end());
+  EXPECT_EQ(std::unique(sorted.begin(), sorted.end()), sorted.end());  // none twice
+  int out_of_order = 0;  // the 6 late ones (steps 14, 21, ..., 49)
+  for (size_t i = 1; i < stamps.size(); ++i) out_of_order += stamps[i] < stamps[i - 1] ? 1 : 0;
+  EXPECT_EQ(out_of_order, 6);
+  ASSERT_FALSE(sizes.empty());
+  EXPECT_EQ(sizes.back(), 60) << log;
+  EXPECT_EQ(log.find("dropped"), std::string::npos) << log;
 }
 
 // Found by fuzzing (tests/fuzz/regressions/rbpf_node/): odometry 4e8 m (or 1e169 m) from its

@@ -223,6 +223,7 @@ Status RbpfSlamOptions::Validate() const {
   FL_RETURN_IF_ERROR(NonNegative("refine_max_correction_rad", refine_max_correction_rad));
   FL_RETURN_IF_ERROR(turn_search.Validate("turn_search"));
   FL_RETURN_IF_ERROR(NonNegative("turn_search_after_s", turn_search_after_s));
+  FL_RETURN_IF_ERROR(NonNegative("late_scan_max_age_s", late_scan_max_age_s));
   FL_RETURN_IF_ERROR(grid.Validate());
   FL_RETURN_IF_ERROR(motion.Validate());
   FL_RETURN_IF_ERROR(matcher.Validate());

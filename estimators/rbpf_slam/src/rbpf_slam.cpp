@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "fusionloc/common/number_format.hpp"
 #include "fusionloc/rbpf_slam/correlative_matcher.hpp"
 #include "fusionloc/rbpf_slam/scan_matcher.hpp"
 
@@ -269,10 +270,19 @@ bool RbpfSlam::SearchAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
 bool RbpfSlam::RefineAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
   if (!opt_.refine_scans_with_icp) return false;
   const Keyframe* keyframe = PlacementKeyframe(utime);
-  if (keyframe == nullptr) return false;
-  const fl::Pose2& T_world_kf = graph_.pose(anchor_.keyframe);
+  if (keyframe == nullptr ||
+      !RefineAgainst(*keyframe, graph_.pose(anchor_.keyframe), hits_base_, T_world_base)) {
+    return false;
+  }
+  ++stats_.scans_refined;
+  return true;
+}
+
+bool RbpfSlam::RefineAgainst(const Keyframe& keyframe, const fl::Pose2& T_world_kf,
+                             const std::vector<Eigen::Vector2d>& points_base,
+                             fl::Pose2* T_world_base) const {
   const fl::Pose2 T_kf_base = T_world_kf.between(*T_world_base);
-  const IcpResult icp = AlignPointToLine(keyframe->normals_base, hits_base_, T_kf_base, opt_.icp);
+  const IcpResult icp = AlignPointToLine(keyframe.normals_base, points_base, T_kf_base, opt_.icp);
   if (!icp.ok || icp.degenerate_dims > 0) return false;
   const fl::Pose2 correction = T_kf_base.between(icp.T_ref_query);
   if (std::hypot(correction.x, correction.y) > opt_.refine_max_correction_m ||
@@ -280,8 +290,63 @@ bool RbpfSlam::RefineAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base) {
     return false;
   }
   *T_world_base = T_world_kf * icp.T_ref_query;
-  ++stats_.scans_refined;
   return true;
+}
+
+fl::Status RbpfSlam::PlaceLateScan(const LaserScan& scan, const fl::Pose2& odom_pose,
+                                   fl::Pose2* T_world_base) {
+  const std::string at = "late scan at utime " + std::to_string(scan.utime);
+  const auto refuse = [&](const std::string& why) {
+    ++stats_.dropped_time_backwards;
+    return Status::Error(at + why + "; dropped");
+  };
+  if (!(opt_.late_scan_max_age_s > 0.0))
+    return refuse(": late scans are not placed (late_scan_max_age_s 0)");
+  if (!input_.initialized() || scan.utime > input_.last_utime()) {
+    return refuse(" is not older than the newest scan (AddScan takes it)");
+  }
+  const Status content = input_.CheckContent(scan, odom_pose);
+  if (!content.ok()) {
+    ++stats_.rejected_bad_scan;
+    return content;
+  }
+  const auto after = std::upper_bound(recent_.begin(), recent_.end(), scan.utime,
+                                      [](fl::Utime t, const RecentScan& r) { return t < r.utime; });
+  if (after != recent_.begin() && std::prev(after)->utime == scan.utime) {
+    return refuse(": a scan with this stamp was taken already (a repeated message)");
+  }
+  if (after == recent_.begin() ||
+      SecondsBetween(scan.utime, input_.last_utime()) > opt_.late_scan_max_age_s) {
+    return refuse(" is more than late_scan_max_age_s (" + FormatDouble(opt_.late_scan_max_age_s) +
+                  " s) older than the newest scan");
+  }
+  const RecentScan& before = *std::prev(after);
+  // The odometry from the scan before (a step beyond the jump limits is not trusted: none).
+  fl::Pose2 step = before.odom_raw.between(odom_pose);
+  if (std::hypot(step.x, step.y) > opt_.motion.max_odometry_jump_m ||
+      std::abs(step.theta) > opt_.motion.max_odometry_jump_rad) {
+    step = fl::Pose2();
+  }
+  const fl::Pose2& T_world_kf = graph_.pose(before.keyframe);
+  fl::Pose2 pose = T_world_kf * before.T_kf_base * step;
+  std::vector<Eigen::Vector2d> points_base;
+  stats_.invalid_beams += ScanToBasePoints(scan, T_base_laser_, opt_.grid.max_range, &points_base);
+  const bool refined =
+      opt_.refine_scans_with_icp && RefineAgainst(keyframes_[static_cast<size_t>(before.keyframe)],
+                                                  T_world_kf, points_base, &pose);
+  const RecentScan late{scan.utime, before.keyframe, T_world_kf.between(pose), before.odom * step,
+                        odom_pose};
+  if (keep_scan_path_) {
+    const auto at_path =
+        std::upper_bound(path_.begin(), path_.end(), scan.utime,
+                         [](fl::Utime t, const PathRecord& r) { return t < r.utime; });
+    path_.insert(at_path,
+                 PathRecord{late.utime, late.keyframe, late.T_kf_base, late.odom, refined});
+  }
+  recent_.insert(after, late);
+  ++stats_.late_scans_placed;
+  *T_world_base = pose;
+  return Status::Ok();
 }
 
 void RbpfSlam::FinishScan(ScanResult* res) {
@@ -531,11 +596,11 @@ Eigen::Vector2d RbpfSlam::OdometrySigma(const Anchor& from, int j, double scale)
 double RbpfSlam::OdometryChi2(const Anchor& from, int j, const fl::Pose2& T_i_j) const {
   const Eigen::Vector2d sigma = OdometrySigma(from, j, 1.0);
   const fl::Pose2 e = OdometryFromAnchor(from, j).between(T_i_j);
-  return (e.x * e.x + e.y * e.y) / (sigma(0) * sigma(0)) + e.theta * e.theta / (sigma(1) * sigma(1));
+  return (e.x * e.x + e.y * e.y) / (sigma(0) * sigma(0)) +
+         e.theta * e.theta / (sigma(1) * sigma(1));
 }
 
-fl::Pose2 RbpfSlam::OdometryAlongDegenerate(const IcpResult& icp,
-                                            const fl::Pose2& odom_rel) const {
+fl::Pose2 RbpfSlam::OdometryAlongDegenerate(const IcpResult& icp, const fl::Pose2& odom_rel) const {
   // I − P projects a step onto H's unconstrained directions (scan_matcher.hpp).
   const Eigen::Matrix3d P =
       WellConstrainedProjector(icp.hessian, icp.length_m, opt_.icp.degeneracy_ratio);
@@ -582,8 +647,7 @@ bool RbpfSlam::ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, Scan
   io.max_rms = g.loop_max_rms;
   const IcpResult icp = AlignPointToLine(LoopSubmap(c, path_length_), hits_base_, prior, io);
   const fl::Pose2 correction = prior.between(icp.T_ref_query);
-  if (!icp.ok ||
-      !Within(correction, g.reuse_max_correction_m, g.reuse_max_correction_rad)) {
+  if (!icp.ok || !Within(correction, g.reuse_max_correction_m, g.reuse_max_correction_rad)) {
     ++stats_.reuse_rejections;
     return false;
   }
@@ -898,6 +962,12 @@ void RbpfSlam::SetKeepScanPath(bool keep) {
 
 void RbpfSlam::RecordScan(const PathRecord& record) {
   if (keep_scan_path_) path_.push_back(record);
+  if (!(opt_.late_scan_max_age_s > 0.0) || record.keyframe < 0) return;
+  recent_.push_back(
+      {record.utime, record.keyframe, record.T_kf_base, record.odom, input_.odom_raw()});
+  while (SecondsBetween(recent_.front().utime, record.utime) > opt_.late_scan_max_age_s) {
+    recent_.pop_front();
+  }
 }
 
 std::vector<StampedPose2> RbpfSlam::Trajectory() const {

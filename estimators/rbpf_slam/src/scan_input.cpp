@@ -7,6 +7,28 @@
 
 namespace fl::rbpf {
 
+fl::Status ScanInput::CheckContent(const LaserScan& scan, const fl::Pose2& odom_pose) const {
+  const std::string at = "scan at utime " + std::to_string(scan.utime);
+  if (!std::isfinite(odom_pose.x) || !std::isfinite(odom_pose.y) ||
+      !std::isfinite(odom_pose.theta)) {
+    return Status::Error("odometry pose at utime " + std::to_string(scan.utime) +
+                         " is not finite; scan dropped");
+  }
+  if (scan.ranges.empty() || !std::isfinite(scan.rad0) || !std::isfinite(scan.radstep) ||
+      scan.radstep == 0.0) {
+    return Status::Error(at + " has no beams or a non-finite/zero angle step; dropped");
+  }
+  if (initialized_ && (scan.ranges.size() != beam_count_ || std::abs(scan.rad0 - rad0_) > 1e-6 ||
+                       std::abs(scan.radstep - radstep_) > 1e-9)) {
+    return Status::Error(at + " has " + std::to_string(scan.ranges.size()) + " beams (rad0 " +
+                         FormatDouble(scan.rad0) + ", step " + FormatDouble(scan.radstep) +
+                         ") but the first scan had " + std::to_string(beam_count_) + " (rad0 " +
+                         FormatDouble(rad0_) + ", step " + FormatDouble(radstep_) +
+                         "); a laser cannot change its geometry: check the LASER channel");
+  }
+  return Status::Ok();
+}
+
 ScanInput::Verdict ScanInput::Accept(const LaserScan& scan, const fl::Pose2& odom_pose,
                                      const MotionOptions& motion, Step* step, fl::Status* error) {
   const std::string at = "scan at utime " + std::to_string(scan.utime);
@@ -15,26 +37,8 @@ ScanInput::Verdict ScanInput::Accept(const LaserScan& scan, const fl::Pose2& odo
                            std::to_string(last_utime_) + "); dropped");
     return Verdict::kTimeBackwards;
   }
-  if (!std::isfinite(odom_pose.x) || !std::isfinite(odom_pose.y) ||
-      !std::isfinite(odom_pose.theta)) {
-    *error = Status::Error("odometry pose at utime " + std::to_string(scan.utime) +
-                           " is not finite; scan dropped");
-    return Verdict::kBadInput;
-  }
-  if (scan.ranges.empty() || !std::isfinite(scan.rad0) || !std::isfinite(scan.radstep) ||
-      scan.radstep == 0.0) {
-    *error = Status::Error(at + " has no beams or a non-finite/zero angle step; dropped");
-    return Verdict::kBadInput;
-  }
-  if (initialized_ && (scan.ranges.size() != beam_count_ || std::abs(scan.rad0 - rad0_) > 1e-6 ||
-                       std::abs(scan.radstep - radstep_) > 1e-9)) {
-    *error = Status::Error(at + " has " + std::to_string(scan.ranges.size()) + " beams (rad0 " +
-                           FormatDouble(scan.rad0) + ", step " + FormatDouble(scan.radstep) +
-                           ") but the first scan had " + std::to_string(beam_count_) + " (rad0 " +
-                           FormatDouble(rad0_) + ", step " + FormatDouble(radstep_) +
-                           "); a laser cannot change its geometry: check the LASER channel");
-    return Verdict::kBadInput;
-  }
+  *error = CheckContent(scan, odom_pose);
+  if (!error->ok()) return Verdict::kBadInput;
   *step = Step();
   if (!initialized_) {
     initialized_ = true;

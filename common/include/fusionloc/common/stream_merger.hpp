@@ -121,6 +121,9 @@ class StreamMerger {
     return true;
   }
 
+  // The stamp of the last item released: an item older than it is refused by Push() (late).
+  Utime released_utime() const { return released_utime_; }
+
   // After Flush(), Pop() releases everything queued (end of a log, shutdown).
   void Flush() { flushing_ = true; }
   size_t queued() const {

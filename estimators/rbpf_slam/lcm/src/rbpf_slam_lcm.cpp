@@ -304,11 +304,35 @@ void RbpfSlamNode::OnLaserToBase(const Pose2& T) {
 
 void RbpfSlamNode::OnLaser(const bot_core::planar_lidar_t& m) {
   status_.CountIn(ch_laser_, m.utime);
+  if (started_ && !node_options_.no_odometry && sync_.Late(m.utime)) {
+    PlaceLateScan(ScanFromLcm(m));
+    return;
+  }
   const Status st = sync_.PushScan(ScanFromLcm(m), lcm_->last_message_utime());
   if (!st.ok()) {
     status_.CountDropped(st.message());
     warn_.Warn(st.message());
   }
+}
+
+void RbpfSlamNode::PlaceLateScan(const LaserScan& scan) {
+  Pose2 odom, T_world_base;
+  Status st = sync_.LookupOdometry(scan.utime, &odom);
+  if (!st.ok()) {
+    st = Status::Error("scan at utime " + std::to_string(scan.utime) +
+                       " arrived late and has no odometry to place it by: " + st.message() +
+                       "; dropped");
+  } else {
+    st = slam_.PlaceLateScan(scan, odom, &T_world_base);
+  }
+  if (!st.ok()) {
+    status_.CountDropped("LASER: " + st.message());
+    warn_.Warn("LASER: " + st.message());
+    return;
+  }
+  lcm_->Publish(ch_pose_, PoseToLcm(scan.utime, T_world_base), scan.utime);
+  status_.CountOut();
+  status_.Set("late_scans_placed", static_cast<double>(slam_.stats().late_scans_placed));
 }
 
 void RbpfSlamNode::Poll() { ProcessReady(false); }
@@ -391,6 +415,7 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   status_.Set("skipped_fast_turn", static_cast<double>(s.skipped_fast_turn));
   status_.Set("scans_refined", static_cast<double>(s.scans_refined));
   status_.Set("turn_scans_placed", static_cast<double>(s.turn_scans_placed));
+  status_.Set("late_scans_placed", static_cast<double>(s.late_scans_placed));
   status_.Set("noisy_factors", static_cast<double>(s.noisy_factors));
   status_.Set("odometry_jumps", static_cast<double>(s.odometry_jumps));
   status_.Set("invalid_beams", static_cast<double>(s.invalid_beams));
@@ -428,7 +453,8 @@ std::string RbpfSlamNode::Summary() const {
          ", lost-track recoveries " + std::to_string(s.recoveries) +
          ", scans held back in fast turns " + std::to_string(s.skipped_fast_turn) +
          " (placed by the turn search " + std::to_string(s.turn_scans_placed) + " of " +
-         std::to_string(s.turn_searches) + " searched)" +
+         std::to_string(s.turn_searches) + " searched)" + ", late scans placed by their stamp " +
+         std::to_string(s.late_scans_placed) +
          ", dropped (time) " + std::to_string(s.dropped_time_backwards) + ", rejected " +
          std::to_string(s.rejected_bad_scan) + ", odometry jumps " +
          std::to_string(s.odometry_jumps) + ", map integrations refused (beyond grid.max_size_m) " +

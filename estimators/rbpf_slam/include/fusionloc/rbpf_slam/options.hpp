@@ -465,6 +465,13 @@ struct RbpfSlamOptions {
   // (RBPF_POSE, the final trajectory); the particles are not changed.
   CorrelativeOptions turn_search = TurnSearchDefaults();  // enabled: false = off
   double turn_search_after_s = 2.0;  // [s]
+  // A scan that arrives after newer ones were processed (delayed or reordered by the network
+  // beyond the node's merge window) and at most this much older than the newest is placed by
+  // its stamp (PlaceLateScan): its pose is the scan before it carried by the odometry, refined by
+  // ICP against that scan's keyframe. The filter, maps and graph do not see it. 0 = off.
+  // By stamps alone a sensor clock that jumps back by less than this looks the same: its scans
+  // are placed at the stamps they carry until it has caught up (the filter is never touched).
+  double late_scan_max_age_s = 1.0;  // [s]
   int seed = 42;                   // [-] random seed (runs are reproducible)
   GridOptions grid;
   MotionOptions motion;
@@ -486,6 +493,7 @@ struct RbpfSlamOptions {
     a->Visit("refine_max_correction_rad", &refine_max_correction_rad);
     a->Visit("turn_search", &turn_search);
     a->Visit("turn_search_after_s", &turn_search_after_s);
+    a->Visit("late_scan_max_age_s", &late_scan_max_age_s);
     a->Visit("seed", &seed);
     a->Visit("grid", &grid);
     a->Visit("motion", &motion);

@@ -19,6 +19,7 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <random>
@@ -58,7 +59,8 @@ int ScanToBasePoints(const LaserScan& scan, const fl::Pose2& T_base_laser, doubl
 struct RbpfSlamStats {
   int64_t scans = 0;                    // accepted scans
   int64_t processed = 0;                // scans the filter ran on
-  int64_t dropped_time_backwards = 0;   // scans whose time did not increase
+  int64_t dropped_time_backwards = 0;   // scans whose time did not increase (and late scans
+                                        //     PlaceLateScan could not place)
   int64_t rejected_bad_scan = 0;        // beam count / geometry changed, non-finite odometry
   int64_t invalid_beams = 0;            // NaN / inf / zero / over-range beams ignored
   int64_t map_integrations_refused = 0; // scans a particle's map (or a rebuilt map) left out:
@@ -71,6 +73,9 @@ struct RbpfSlamStats {
                                         //     refinement could not place, searched against
                                         //     their keyframe (turn_search)
   int64_t turn_scans_placed = 0;        // ... and placed by the search and ICP
+  int64_t late_scans_placed = 0;        // scans delivered after newer ones, placed by their
+                                        //     stamp (PlaceLateScan); refused ones count as
+                                        //     dropped_time_backwards
   int64_t odometry_jumps = 0;
   int64_t resamples = 0;
   int64_t match_failures = 0;           // particle updates that fell back to odometry
@@ -121,6 +126,17 @@ class RbpfSlam {
   fl::Status AddScan(const LaserScan& scan, const fl::Pose2& odom_pose, ScanResult* result,
                      bool defer_keyframe = false);
   void FinishScan(ScanResult* result);
+
+  // A scan delivered after newer ones were processed (delayed or reordered by the network), at
+  // most options.late_scan_max_age_s older than the newest: placed by its stamp without the
+  // filter, the maps or the graph seeing it. Its pose is the final pose of the scan before it
+  // carried by the odometry between the two, refined by ICP against that scan's keyframe as
+  // refine_scans_with_icp refines every scan; *T_world_base gets it and, with the scan path
+  // kept, the scan enters Trajectory() in time order. Error (counted, nothing changes) for a
+  // stamp already taken (a repeated message), one older than that or than every scan kept,
+  // one not older than the newest (AddScan's), or a scan AddScan would refuse.
+  fl::Status PlaceLateScan(const LaserScan& scan, const fl::Pose2& odom_pose,
+                           fl::Pose2* T_world_base);
 
   // Final pose-graph optimisation (call at the end of a log before Trajectory()).
   void Finish();
@@ -191,8 +207,18 @@ class RbpfSlam {
     bool reused = false;          // an existing keyframe reused on a revisit
   };
 
+  // An accepted scan, kept for late_scan_max_age_s: late scans are placed from these.
+  struct RecentScan {
+    fl::Utime utime;
+    int keyframe;
+    fl::Pose2 T_kf_base;
+    fl::Pose2 odom;      // flagged jumps removed (PathRecord::odom)
+    fl::Pose2 odom_raw;  // as it came
+  };
+
   void ConvertScan(const LaserScan& scan, ScanResult* result);
-  void RecordScan(const PathRecord& record);  // into path_, if kept
+  // Into path_ (if kept) and recent_ (the current scan; input_.odom_raw() is its raw odometry).
+  void RecordScan(const PathRecord& record);
   // The current scan's pose T_world_base against the anchor keyframe's scan: refined
   // (RefineAgainstKeyframe), or if that failed and the scan is in or just after a fast turn,
   // placed by the turn search (SearchAgainstKeyframe); true if *T_world_base moved.
@@ -205,6 +231,12 @@ class RbpfSlam {
   bool SearchAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base);
   // ICP from T_world_base (refine_scans_with_icp); true if refined within the bounds.
   bool RefineAgainstKeyframe(fl::Utime utime, fl::Pose2* T_world_base);
+  // ICP of points_base against `keyframe` (at T_world_kf) from *T_world_base; true (and
+  // *T_world_base moved) if it passed its checks with every direction constrained and moved the
+  // pose by at most refine_max_correction_m / _rad.
+  bool RefineAgainst(const Keyframe& keyframe, const fl::Pose2& T_world_kf,
+                     const std::vector<Eigen::Vector2d>& points_base,
+                     fl::Pose2* T_world_base) const;
   void ProcessFilter(const fl::Pose2& delta, bool jump, ScanResult* result);
   bool Integrate(Particle* p);
   // Integrates points (base frame) seen from T_world_base into map.
@@ -298,6 +330,7 @@ class RbpfSlam {
   int optimized_loop_edges_ = 0;
   bool keep_scan_path_ = true;
   std::vector<PathRecord> path_;  // every accepted scan (if keep_scan_path_)
+  std::deque<RecentScan> recent_;  // accepted scans of the last late_scan_max_age_s, in order
   RbpfSlamStats stats_;
 };
 

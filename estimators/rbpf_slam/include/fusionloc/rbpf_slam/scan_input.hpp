@@ -38,11 +38,16 @@ class ScanInput {
   // fills *step. Otherwise nothing changes and *error says why (naming the scan's utime).
   Verdict Accept(const LaserScan& scan, const fl::Pose2& odom_pose, const MotionOptions& motion,
                  Step* step, fl::Status* error);
+  // The checks of Accept() but the time's, without taking the scan (a late scan placed by its
+  // stamp): Ok, or why it cannot be used.
+  fl::Status CheckContent(const LaserScan& scan, const fl::Pose2& odom_pose) const;
 
   bool initialized() const { return initialized_; }
   fl::Utime last_utime() const { return last_utime_; }
   // T_odom_base with the flagged jumps removed, at the last accepted scan.
   const fl::Pose2& odom() const { return odom_; }
+  // The raw odometry pose at the last accepted scan.
+  const fl::Pose2& odom_raw() const { return last_odom_raw_; }
 
  private:
   bool initialized_ = false;

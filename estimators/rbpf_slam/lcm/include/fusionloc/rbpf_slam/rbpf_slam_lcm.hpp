@@ -64,6 +64,11 @@ class ScanOdometrySync {
   void Process(bool flush, const OnScan& on_scan,
                const std::function<void(const std::string&)>& warn);
   size_t waiting() const { return pending_.size(); }
+  // Whether a scan at utime is late: data after its time was handed on already (PushScan would
+  // refuse it); the node places such a scan by its stamp (RbpfSlam::PlaceLateScan).
+  bool Late(Utime utime) const { return utime < merger_.released_utime(); }
+  // The buffered odometry at utime (a late scan's).
+  Status LookupOdometry(Utime utime, Pose2* odom) const { return odom_buffer_.Lookup(utime, odom); }
 
  private:
   using Input = std::variant<LaserScan, Pose2>;
@@ -144,6 +149,9 @@ class RbpfSlamNode : public LcmNode {
  private:
   void OnLaserToBase(const Pose2& T_base_laser);
   void OnLaser(const bot_core::planar_lidar_t& msg);
+  // A scan delivered after data past its time was processed (delayed or reordered beyond the
+  // merge window): placed by its stamp (RbpfSlam::PlaceLateScan), its RBPF_POSE published late.
+  void PlaceLateScan(const LaserScan& scan);
   // Runs every scan the synchronisation hands on (with flush: every scan still waiting too).
   void ProcessReady(bool flush);
   void RunScan(const LaserScan& scan, const Pose2* odom, const Status& lookup);
