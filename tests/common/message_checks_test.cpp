@@ -27,6 +27,21 @@ TEST(MessageChecks, SaneMessagesPass) {
   EXPECT_EQ(BadField(t), "");
 }
 
+// A static transform's stamp is not used by its consumers, so the edge judges it: a mounting
+// stamped before 1970 or beyond 2^61 us is from a broken sender; 0 (a static transform's usual
+// stamp) is fine.
+TEST(MessageChecks, AStaticTransformWithAnImpossibleStampIsNamed) {
+  bot_core::rigid_transform_t tf{};
+  tf.quat[0] = 1.0;
+  EXPECT_EQ(BadField(tf), "");
+  tf.utime = 1000000000000000;
+  EXPECT_EQ(BadField(tf), "");
+  tf.utime = -1;
+  EXPECT_EQ(BadField(tf), "utime = -1");
+  tf.utime = kMaxStampUs;
+  EXPECT_EQ(BadField(tf), "utime = " + std::to_string(kMaxStampUs));
+}
+
 TEST(MessageChecks, EachBadValueIsNamedWithItsField) {
   for (const double bad : {kNan, kInf, -kInf, 1e30}) {
     bot_core::pose_t pose{};

@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
+#include <string>
 #include <vector>
 
 namespace fl {
@@ -38,6 +40,12 @@ class FirstBad {
   FirstBad& Vector(const char* name, const std::vector<T>& values) {
     return Array(name, values.data(), values.size());
   }
+  // A time stamp [us]: negative (before 1970) or beyond 2^61 us cannot come from a clock.
+  FirstBad& Stamp(const char* name, int64_t t) {
+    if (found_.empty() && (t < 0 || t >= kMaxStampUs))
+      found_ = std::string(name) + " = " + std::to_string(t);
+    return *this;
+  }
   std::string result() const { return found_; }
 
  private:
@@ -61,7 +69,11 @@ std::string BadField(const bot_core::pose_t& m) {
 }
 
 std::string BadField(const bot_core::rigid_transform_t& m) {
-  return FirstBad().Array("trans", m.trans, 3).Array("quat", m.quat, 4).result();
+  return FirstBad()
+      .Stamp("utime", m.utime)
+      .Array("trans", m.trans, 3)
+      .Array("quat", m.quat, 4)
+      .result();
 }
 
 std::string BadField(const fusionloc::wheel_odometry_t& m) {

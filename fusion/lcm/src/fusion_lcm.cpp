@@ -9,6 +9,7 @@
 #include "fusionloc/common/channels.hpp"
 #include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/log.hpp"
+#include "fusionloc/common/message_checks.hpp"
 #include "fusionloc/common/robot_description_lcm.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/maps/map_export.hpp"
@@ -17,10 +18,9 @@
 namespace fl::fusion {
 namespace {
 
-// Time stamps beyond ±2^61 us (about 73000 years) cannot come from a clock: refused at the
-// door, so that the fusion's differences of two time stamps never overflow int64.
-constexpr Utime kMaxUtime = Utime{1} << 61;
-bool PlausibleUtime(Utime t) { return t > -kMaxUtime && t < kMaxUtime; }
+// Time stamps beyond ±kMaxStampUs (2^61 us, about 73000 years) cannot come from a clock: refused
+// at the door, so that the fusion's differences of two time stamps never overflow int64.
+bool PlausibleUtime(Utime t) { return t > -kMaxStampUs && t < kMaxStampUs; }
 std::atomic<bool> g_save_map_requested{false};
 }  // namespace
 

@@ -353,6 +353,8 @@ void StereoVoNode::OnStereo(const bot_core::images_t& msg) {
   switch (r.state) {
     case TrackingState::kRejected:
       status_.CountDropped(r.message);
+      rejected_warning_.Warn(ch_stereo_ + " frame " + std::to_string(msg.utime) + " " +
+                             r.message + "; dropped");
       return;
     case TrackingState::kNotTracked:
       ++not_tracked_;

@@ -20,6 +20,7 @@
 #include "bot_core/pose_t.hpp"
 #include "bot_core/rigid_transform_t.hpp"
 #include "fusionloc/common/lcm_process.hpp"
+#include "fusionloc/common/log.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/laser_scan_3d_t.hpp"
 #include "fusionloc/point_cloud_t.hpp"
@@ -94,6 +95,7 @@ class StereoVoNode : public LcmNode {
   std::optional<fusionloc::stereo_calibration_t> intrinsics_;
   std::optional<bot_core::rigid_transform_t> camera_to_base_;
   StatusReporter status_;
+  RateLimitedWarning rejected_warning_;  // frames the VO refused (a late frame, a bad image)
   std::unique_ptr<StereoVo> vo_;
   StereoCalibration active_calibration_;
   int64_t frames_ = 0, tracked_ = 0, not_tracked_ = 0, keyframes_ = 0;
