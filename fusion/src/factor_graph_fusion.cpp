@@ -838,8 +838,9 @@ std::vector<TrajectoryPoint> FactorGraphFusion::Trajectory(Utime from) const {
                        [](const RetiredNode& d, Utime t) { return d.utime < t; });
   std::vector<TrajectoryPoint> out;
   out.reserve(static_cast<size_t>(retired_.end() - first_retired) + nodes_.size());
-  for (auto it = first_retired; it != retired_.end(); ++it)
+  for (auto it = first_retired; it != retired_.end(); ++it) {
     out.push_back({it->utime, it->T_map_base});
+  }
   for (int k = num_fixed_; k < num_nodes(); ++k) {
     if (nodes_[k].utime >= from) out.push_back({nodes_[k].utime, ToPose2(nodes_[k].state)});
   }

@@ -300,8 +300,9 @@ fl::Status RbpfSlam::PlaceLateScan(const LaserScan& scan, const fl::Pose2& odom_
     ++stats_.dropped_time_backwards;
     return Status::Error(at + why + "; dropped");
   };
-  if (!(opt_.late_scan_max_age_s > 0.0))
+  if (!(opt_.late_scan_max_age_s > 0.0)) {
     return refuse(": late scans are not placed (late_scan_max_age_s 0)");
+  }
   if (!input_.initialized() || scan.utime > input_.last_utime()) {
     return refuse(" is not older than the newest scan (AddScan takes it)");
   }
