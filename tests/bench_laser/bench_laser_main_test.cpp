@@ -79,6 +79,40 @@ TEST(BenchLaserMain, AMissingSimulatedWorldIsAUsageErrorNamingTheFile) {
   EXPECT_NE(r.err.find("config/sim_paper.yaml not found"), std::string::npos) << r.err;
 }
 
+// --sim-duration-s: the world simulated that long (its route looped), --only selecting the world
+// by its run name; the table goes to its own section and the full laser one stays as it was.
+TEST(BenchLaserMain, ALongSimulatedRunIsRecordedInItsOwnSection) {
+  TempDir dir;
+  std::filesystem::create_directories(dir.file("laser"));
+  fl::test::WriteText(dir.file("laser/arc-corrected.log"), fl::test::CarmenArcLog(20));
+  const std::string laser_section =
+      "<!-- bench:laser:begin -->\nthe full run's table\n<!-- bench:laser:end -->\n";
+  fl::test::WriteText(dir.file("bench.md"), "# Benchmarks\n\n" + laser_section);
+  const std::string common = BinDir() + "/fl-bench-laser --data " + dir.path() +
+                             " --config-dir " + fl::test::SourceDir() +
+                             "/config --json out.json --png-dir png --refit=false";
+  const auto r = RunCommand(common + " --only sim-paper --sim-worlds paper --sim-duration-s 130"
+                                     " --seeds 1 --record bench.md",
+                            dir);
+  ASSERT_EQ(r.status, 0) << r.out << r.err;
+  const std::string json = ReadFile(dir.file("out.json"));
+  // 130 s at the laser's 10 Hz (the world's own duration is 100 s); the log left out.
+  EXPECT_EQ(Metric(json, "sim-paper", "items"), 1301) << json;
+  EXPECT_TRUE(std::isnan(Metric(json, "arc-corrected", "items"))) << json;
+  const std::string md = ReadFile(dir.file("bench.md"));
+  EXPECT_NE(md.find(laser_section), std::string::npos) << md;
+  EXPECT_NE(md.find("<!-- bench:laser-long:begin -->"), std::string::npos) << md;
+  EXPECT_NE(md.find("| sim-paper |"), std::string::npos) << md;
+
+  // Bad values and a duration with no world to apply it to are usage errors.
+  const auto negative = RunCommand(common + " --sim-duration-s -5", dir);
+  EXPECT_EQ(negative.status, 2) << negative.err;
+  EXPECT_NE(negative.err.find("--sim-duration-s -5"), std::string::npos) << negative.err;
+  const auto no_world = RunCommand(common + " --sim-duration-s 60 --sim-worlds=", dir);
+  EXPECT_EQ(no_world.status, 2) << no_world.err;
+  EXPECT_NE(no_world.err.find("none is selected"), std::string::npos) << no_world.err;
+}
+
 // The poses of fl::test::CarmenArcLog's scans (its defaults).
 std::vector<fl::Pose2> ArcPoses(int scans) {
   std::vector<fl::Pose2> out;

@@ -349,7 +349,9 @@ int main(int argc, char** argv) {
   std::string seeds_text = "1,2,3,4,5,6";
   cli.AddFlag("config", &config,
               "RBPF options YAML (default: built-in defaults = config/rbpf_slam.yaml)");
-  cli.AddFlag("only", &only, "run only logs whose file name contains this text");
+  cli.AddFlag("only", &only,
+              "run only the logs whose file name, and the simulated worlds whose run name "
+              "(sim-<world>), contain this text");
   cli.AddFlag("particles", &particles, "override the particle count (0 = from the options)");
   cli.AddFlag("seeds", &seeds_text,
               "comma-separated run seeds: run s uses seed s for the synthetic odometry noise of "
@@ -363,6 +365,12 @@ int main(int argc, char** argv) {
               "CONFIG_DIR/sim_<world>.yaml, laser + odometry only, the world's own seed; the run "
               "seeds vary the filter), named sim-<world>; empty = none");
   cli.AddFlag("config-dir", &config_dir, "folder with sim_<world>.yaml (for --sim-worlds)");
+  double sim_duration_s = 0.0;
+  cli.AddFlag("sim-duration-s", &sim_duration_s,
+              "simulate this long instead of the world's own duration_s (0 = its own): the "
+              "simulator loops its route, so a long run shows whether the graph stays bounded "
+              "and the estimate steady; such a run is recorded in its own section "
+              "(bench:laser-long), not the laser one");
   double noise_scale = 1.0;
   cli.AddFlag("odometry-noise", &noise_scale,
               "scale of the synthetic odometry noise of corrected logs (all of the importer's "
@@ -401,8 +409,16 @@ int main(int argc, char** argv) {
       "\nRecording (--record FILE.md): the laser section of FILE.md is rewritten with this "
       "run's table; with --peers the comparison goes to its own section (bench:laser-peers); "
       "with --only the laser section is left alone (a table of some logs would replace the "
-      "full one; the JSON is still written).\n");
+      "full one; the JSON is still written); with --sim-duration-s the run goes to its own "
+      "section (bench:laser-long).\n"
+      "\nLong run (the recorded one): ./fusionloc bench laser --only sim-paper --sim-worlds paper "
+      "--sim-duration-s 10800 --seeds 1,2,3\n");
   if (!program.Parse(argc, argv)) return program.exit_code();
+  if (!(sim_duration_s >= 0.0 && sim_duration_s <= 7 * 24 * 3600.0)) {
+    std::cerr << "fl-bench-laser: --sim-duration-s " << sim_duration_s
+              << ": must be 0 (the world's own duration) or a time in seconds up to a week\n";
+    return 2;
+  }
   if (peers) {
     if (peers_rawlog_tool.empty()) {
       std::error_code e;
@@ -507,6 +523,7 @@ int main(int argc, char** argv) {
     if (b == a) continue;
     Input in;
     in.name = "sim-" + sim_worlds.substr(a, b - a);
+    if (!only.empty() && in.name.find(only) == std::string::npos) continue;
     in.sim_config = config_dir + "/sim_" + sim_worlds.substr(a, b - a) + ".yaml";
     in.log = in.sim_config;
     if (!fs::exists(in.sim_config)) {
@@ -517,13 +534,21 @@ int main(int argc, char** argv) {
     }
     inputs.push_back(in);
   }
+  if (sim_duration_s > 0.0 &&
+      std::none_of(inputs.begin(), inputs.end(),
+                   [](const Input& in) { return !in.sim_config.empty(); })) {
+    std::cerr << "fl-bench-laser: --sim-duration-s applies to simulated worlds and none is "
+                 "selected; pass --sim-worlds WORLD (and --only sim-WORLD to leave the logs out)\n";
+    return 2;
+  }
   if (inputs.empty()) {
     std::cerr << "fl-bench-laser: no CARMEN logs (.clf, .log, .log.gz) in " << dir
               << (only.empty() ? "" : " matching --only " + only) << "; pass --data DIR\n";
     return 2;
   }
 
-  fl::bench::Report report("laser");
+  // A long simulated run has its own table: it would replace the full run's.
+  fl::bench::Report report(sim_duration_s > 0.0 ? "laser-long" : "laser");
   fl::bench::Report peer_report("laser-peers");
   const std::string tmp =
       (fs::temp_directory_path() / ("fl_bench_laser_" + std::to_string(getpid()))).string();
@@ -543,7 +568,9 @@ int main(int argc, char** argv) {
         run_options.seed = options.seed + 7 * static_cast<int>(seed - 1);
         LogData data;
         if (!in.sim_config.empty()) {
-          data = SimulateWorld(fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config));
+          fl::sim::SimOptions so = fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config);
+          if (sim_duration_s > 0.0) so.duration_s = sim_duration_s;
+          data = SimulateWorld(so);
         } else {
           fl::importers::CarmenOptions co;
           co.seed = seed;
@@ -871,7 +898,7 @@ int main(int argc, char** argv) {
   }
   if (!std::getenv("FL_BENCH_KEEP_TMP")) fs::remove_all(tmp, ec);
   fl::bench::CommonArgs laser_args = args;
-  if (!only.empty() && !laser_args.record.empty()) {
+  if (!only.empty() && !laser_args.record.empty() && sim_duration_s <= 0.0) {
     laser_args.record.clear();
     std::cerr << "fl-bench-laser: --only " << only << ": not recording the laser section of "
               << args.record << " (it holds the full run; this one covers some logs; the JSON "
