@@ -379,10 +379,11 @@ struct GraphOptions {
   // loop_max_rms in noisy data, a drift beyond reuse_max_correction), the filter is anchored to
   // it unverified: its pose relative to the keyframe as the filter has it, no factor, no
   // correction. The next keyframe due outside the mapped region starts its edges there. With
-  // keyframes 0.5 m apart a pass puts about two within reuse_distance of a pose: 4 = about two
-  // passes per place. Bounds the graph by the mapped area, not by the time driven (the 30-minute
-  // soak, RELIABILITY.md). 0 = no bound.
-  int max_keyframes_per_place = 4;
+  // keyframes 0.5 m apart a pass puts about two within reuse_distance of a pose: 3 = the first
+  // pass and part of the second. Bounds the graph by the mapped area, not by the time driven
+  // (the 30-minute soak, RELIABILITY.md; 3 hours of simulation, RBPF_SLAM.md item 7: fewer
+  // keyframes and a lower error than 4 on every seed). 0 = no bound.
+  int max_keyframes_per_place = 3;
 
   template <class A>
   void Serialize(A* a) {
