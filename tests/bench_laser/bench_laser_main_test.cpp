@@ -108,6 +108,9 @@ TEST(BenchLaserMain, ALongSimulatedRunIsRecordedInItsOwnSection) {
   const auto negative = RunCommand(common + " --sim-duration-s -5", dir);
   EXPECT_EQ(negative.status, 2) << negative.err;
   EXPECT_NE(negative.err.find("--sim-duration-s -5"), std::string::npos) << negative.err;
+  const auto too_long = RunCommand(common + " --sim-duration-s 100000", dir);
+  EXPECT_EQ(too_long.status, 2) << too_long.err;
+  EXPECT_NE(too_long.err.find("held in memory"), std::string::npos) << too_long.err;
   const auto no_world = RunCommand(common + " --sim-duration-s 60 --sim-worlds=", dir);
   EXPECT_EQ(no_world.status, 2) << no_world.err;
   EXPECT_NE(no_world.err.find("none is selected"), std::string::npos) << no_world.err;
