@@ -24,6 +24,7 @@
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <optional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -564,6 +565,9 @@ int main(int argc, char** argv) {
     std::vector<fl::eval::Trajectory> seed_trajectories;  // for the run-to-run spread
     fl::eval::Trajectory reference;                       // the same for every seed
     std::vector<fl::eval::Relation> relations;            // read at the first seed
+    // A simulated world's data: the run seeds vary the filter, not the world, so it is simulated
+    // once (at the first seed) and every run starts from a copy.
+    std::optional<LogData> simulated;
     for (const uint64_t seed : seeds) {
       const std::string run_name =
           seeds.size() > 1 ? in.name + "/s" + std::to_string(seed) : in.name;
@@ -572,9 +576,12 @@ int main(int argc, char** argv) {
         run_options.seed = options.seed + 7 * static_cast<int>(seed - 1);
         LogData data;
         if (!in.sim_config.empty()) {
-          fl::sim::SimOptions so = fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config);
-          if (sim_duration_s > 0.0) so.duration_s = sim_duration_s;
-          data = SimulateWorld(so);
+          if (!simulated) {
+            fl::sim::SimOptions so = fl::LoadYamlFile<fl::sim::SimOptions>(in.sim_config);
+            if (sim_duration_s > 0.0) so.duration_s = sim_duration_s;
+            simulated = SimulateWorld(so);
+          }
+          data = *simulated;
         } else {
           fl::importers::CarmenOptions co;
           co.seed = seed;
