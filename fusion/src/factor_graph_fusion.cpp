@@ -253,8 +253,8 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     const Eigen::Vector3d sigma(options_.prior_sigma_xy, options_.prior_sigma_xy,
                                 options_.prior_sigma_theta);
     prior.information = sigma.cwiseInverse().cwiseAbs2().asDiagonal();
-    const Eigen::Matrix3d sqrt_info = sigma.cwiseInverse().asDiagonal();
-    prior.cost.reset(Se2PriorCost::Create(node.state, sqrt_info));
+    prior.sqrt_information = sigma.cwiseInverse().asDiagonal();
+    MakeCost(&prior);
     AddGraphFactor(std::move(prior));
   }
   if (index > 0 &&
@@ -455,13 +455,11 @@ Status FactorGraphFusion::AttachFactor(const RelativePoseFactor& f, const Pose2&
       TransformBetweenInformation(information, T_ni_ti, T_ti_tj, T_nj_tj.inverse());
   factor.source = f.source;
   factor.is_loop_closure = f.is_loop_closure;
-  Eigen::Matrix3d sqrt_info;
-  if (!SqrtInformation<3>(factor.information, &sqrt_info)) {
+  if (!SqrtInformation<3>(factor.information, &factor.sqrt_information)) {
     return Reject(&counters_.rejected_information,
                   what + ": information not positive definite once attached; dropped");
   }
-  factor.cost.reset(Se2BetweenCost::Create(factor.T_i_j, sqrt_info));
-  if (f.source != FactorSource::kWheelOdometry) factor.loss = robust_loss_;
+  MakeCost(&factor);
   if (f.is_loop_closure && options_.full_solve_on_loop_closure) full_solve_requested_ = true;
   AddGraphFactor(std::move(factor));
   return Status::Ok();
@@ -502,21 +500,20 @@ void FactorGraphFusion::AddChainFactor(int j) {
   const double sth =
       options_.chain_sigma_theta_min + options_.chain_sigma_theta_per_rad * std::fabs(motion.theta);
   ++counters_.chain_factors;
-  AddSequentialFactor(j, motion, sxy, sth, FactorSource::kLaser, robust_loss_);
+  AddSequentialFactor(j, motion, sxy, sth, FactorSource::kLaser);
 }
 
 void FactorGraphFusion::AddSequentialFactor(int j, const Pose2& motion, double sigma_xy,
-                                            double sigma_theta, FactorSource source,
-                                            std::shared_ptr<ceres::LossFunction> loss) {
+                                            double sigma_theta, FactorSource source) {
   const Eigen::Vector3d sqrt_info(1 / sigma_xy, 1 / sigma_xy, 1 / sigma_theta);
   Factor factor;
   factor.i = j - 1;
   factor.j = j;
   factor.T_i_j = motion;
   factor.information = sqrt_info.cwiseAbs2().asDiagonal();
+  factor.sqrt_information = sqrt_info.asDiagonal();
   factor.source = source;
-  factor.cost.reset(Se2BetweenCost::Create(motion, sqrt_info.asDiagonal()));
-  factor.loss = std::move(loss);
+  MakeCost(&factor);
   AddGraphFactor(std::move(factor));
 }
 
@@ -605,7 +602,7 @@ void FactorGraphFusion::AddOdometryFactors() {
                        options_.odom_sigma_theta_per_rad * std::fabs(motion.theta) +
                        options_.odom_sigma_theta_per_m * dist;
     ++counters_.odometry_factors;
-    AddSequentialFactor(j, motion, sxy, sth, FactorSource::kWheelOdometry, nullptr);
+    AddSequentialFactor(j, motion, sxy, sth, FactorSource::kWheelOdometry);
   }
 }
 
@@ -915,14 +912,13 @@ void FactorGraphFusion::RetireOldNodes() {
       const Pose2 P = ToPose2(nodes_[ai].state).between(ToPose2(nodes_[f.i].state));
       const Pose2 Q = ToPose2(nodes_[f.j].state).between(ToPose2(nodes_[aj].state));
       const Eigen::Matrix3d information = TransformBetweenInformation(f.information, P, f.T_i_j, Q);
-      Eigen::Matrix3d sqrt_info;
-      if (!SqrtInformation<3>(information, &sqrt_info)) {
+      if (!SqrtInformation<3>(information, &f.sqrt_information)) {
         ++counters_.retired_factors;
         continue;
       }
       f.T_i_j = P * f.T_i_j * Q;
       f.information = information;
-      f.cost.reset(Se2BetweenCost::Create(f.T_i_j, sqrt_info));
+      MakeCost(&f);
       ++counters_.reanchored_factors;
     }
     f.i = index[static_cast<size_t>(ai)];
@@ -949,6 +945,273 @@ void FactorGraphFusion::RetireOldNodes() {
   num_fixed_ = static_cast<int>(map_nodes.size());
   nodes_ = std::move(nodes);
   factors_ = std::move(factors);
+}
+
+void FactorGraphFusion::MakeCost(Factor* f) const {
+  if (f->is_prior) {
+    f->cost.reset(Se2PriorCost::Create(ToVector(f->T_i_j), f->sqrt_information));
+    f->loss = nullptr;
+  } else {
+    f->cost.reset(Se2BetweenCost::Create(f->T_i_j, f->sqrt_information));
+    f->loss = f->source == FactorSource::kWheelOdometry ? nullptr : robust_loss_;
+  }
+}
+
+// Saved state: version 1. Counts before sequences; a node's factor list is rebuilt from the
+// factors. Each read names what it reads, so that a damaged state names its field.
+namespace {
+constexpr char kStateMagic[] = "FLFUSION";
+constexpr uint32_t kStateVersion = 1;
+
+void PutSummary(StateWriter* w, const SolveSummary& s) {
+  w->Put(static_cast<uint8_t>(s.ran));
+  w->Put(static_cast<uint8_t>(s.full));
+  w->Put(s.termination);
+  w->Put(static_cast<int32_t>(s.iterations));
+  w->Put(s.initial_cost);
+  w->Put(s.final_cost);
+  w->Put(s.time_ms);
+  w->Put(static_cast<int32_t>(s.num_nodes));
+  w->Put(static_cast<int32_t>(s.num_factors));
+}
+
+SolveSummary GetSummary(StateReader* r) {
+  SolveSummary s;
+  s.ran = r->GetBool("summary.ran");
+  s.full = r->GetBool("summary.full");
+  s.termination = r->GetString("summary.termination");
+  s.iterations = r->Get<int32_t>("summary.iterations");
+  s.initial_cost = r->Get<double>("summary.initial_cost");
+  s.final_cost = r->Get<double>("summary.final_cost");
+  s.time_ms = r->Get<double>("summary.time_ms");
+  s.num_nodes = r->Get<int32_t>("summary.num_nodes");
+  s.num_factors = r->Get<int32_t>("summary.num_factors");
+  return s;
+}
+
+// The counters in one list, for both directions.
+template <class F>
+void ForEachCounter(FusionCounters* c, F f) {
+  for (int64_t* v :
+       {&c->nodes, &c->factors_added, &c->rejected_node_time, &c->rejected_non_finite,
+        &c->rejected_information, &c->rejected_no_node, &c->rejected_same_node,
+        &c->dropped_pending_overflow, &c->rejected_odometry, &c->late_laser_poses_placed,
+        &c->late_odometry_placed, &c->odometry_gaps, &c->odometry_factors, &c->chain_factors,
+        &c->full_solves, &c->updates, &c->retired_nodes, &c->merged_nodes,
+        &c->reanchored_factors, &c->retired_factors}) {
+    f(v);
+  }
+}
+
+void PutRelativePoseFactor(StateWriter* w, const RelativePoseFactor& f) {
+  w->Put(f.utime_i);
+  w->Put(f.utime_j);
+  w->Put(Eigen::Matrix4d(f.T_i_j.matrix()));
+  w->Put(f.information);
+  w->Put(static_cast<int8_t>(f.source));
+  w->Put(static_cast<uint8_t>(f.is_loop_closure));
+}
+
+FactorSource GetSource(StateReader* r, const char* what) {
+  const int8_t s = r->Get<int8_t>(what);
+  if (s < 0 || s > static_cast<int8_t>(FactorSource::kWheelOdometry)) {
+    r->Fail(std::string(what) + ": no factor source " + std::to_string(s));
+  }
+  return static_cast<FactorSource>(s);
+}
+
+template <int R, int C>
+Eigen::Matrix<double, R, C> GetFiniteMatrix(StateReader* r, const char* what) {
+  Eigen::Matrix<double, R, C> m;
+  r->Get(&m, what);
+  if (!m.allFinite()) r->Fail(std::string(what) + " is not finite");
+  return m;
+}
+
+Pose2 GetFinitePose(StateReader* r, const char* what) {
+  const Pose2 p = r->GetPose2(what);
+  if (!Finite(p)) r->Fail(std::string(what) + " is not finite");
+  return p;
+}
+
+RelativePoseFactor GetRelativePoseFactor(StateReader* r) {
+  RelativePoseFactor f;
+  f.utime_i = r->Get<int64_t>("pending.utime_i");
+  f.utime_j = r->Get<int64_t>("pending.utime_j");
+  f.T_i_j.matrix() = GetFiniteMatrix<4, 4>(r, "pending.T_i_j");
+  f.information = GetFiniteMatrix<6, 6>(r, "pending.information");
+  f.source = GetSource(r, "pending.source");
+  f.is_loop_closure = r->GetBool("pending.is_loop_closure");
+  return f;
+}
+
+// Smallest saved sizes, for StateReader::Count.
+constexpr size_t kNodeBytes = 8 + 3 * 8 + 3 * 8 + 1;
+constexpr size_t kFactorBytes = 4 + 4 + 3 * 8 + 2 * 9 * 8 + 3;
+constexpr size_t kPendingBytes = 8 + 8 + 16 * 8 + 36 * 8 + 2 + 3 * 8 + 9 * 8;
+constexpr size_t kPoseSampleBytes = 8 + 3 * 8;
+constexpr size_t kRetiredBytes = 8 + 6 * 8 + 8;
+
+}  // namespace
+
+void FactorGraphFusion::SaveState(StateWriter* w) const {
+  if (job_outstanding_) {
+    throw std::logic_error("FactorGraphFusion::SaveState while a full-solve job is outstanding");
+  }
+  w->Begin(kStateMagic, kStateVersion);
+  w->PutCount(nodes_.size());
+  for (const Node& n : nodes_) {
+    w->Put(n.utime);
+    w->Put(n.T_map_base_rbpf);
+    w->Put(n.state);
+    w->Put(static_cast<uint8_t>(n.fixed));
+  }
+  w->PutCount(factors_.size());
+  for (const Factor& f : factors_) {
+    w->Put(static_cast<int32_t>(f.i));
+    w->Put(static_cast<int32_t>(f.j));
+    w->Put(f.T_i_j);
+    w->Put(f.information);
+    w->Put(f.sqrt_information);
+    w->Put(static_cast<int8_t>(f.source));
+    w->Put(static_cast<uint8_t>(f.is_loop_closure));
+    w->Put(static_cast<uint8_t>(f.is_prior));
+  }
+  w->PutCount(pending_.size());
+  for (const PendingFactor& p : pending_) {
+    PutRelativePoseFactor(w, p.factor);
+    w->Put(p.T_i_j);
+    w->Put(p.information);
+  }
+  w->PutCount(odometry_.size());
+  for (const OdomSample& o : odometry_) {
+    w->Put(o.utime);
+    w->Put(o.T_odom_base);
+  }
+  w->PutCount(late_placed_.size());
+  for (Utime t : late_placed_) w->Put(t);
+  w->PutCount(retired_.size());
+  for (const RetiredNode& r : retired_) {
+    w->Put(r.utime);
+    w->Put(r.T_map_base);
+    w->Put(r.T_map_base_rbpf);
+    w->Put(r.anchor_utime);
+  }
+  w->Put(static_cast<int32_t>(next_odom_pair_));
+  w->Put(static_cast<int32_t>(oldest_touched_node_));
+  w->Put(static_cast<uint8_t>(full_solve_requested_));
+  w->Put(nodes_at_last_full_solve_);
+  w->Put(static_cast<int32_t>(num_fixed_));
+  w->Put(optimised_until_);
+  w->Put(latest_covariance_);
+  PutSummary(w, last_summary_);
+  FusionCounters counters = counters_;
+  ForEachCounter(&counters, [w](int64_t* v) { w->Put(*v); });
+}
+
+void FactorGraphFusion::LoadState(StateReader* r) {
+  r->Begin(kStateMagic, kStateVersion);
+  // Read into a new object, checked, then swapped in: a bad state leaves this one unchanged.
+  FactorGraphFusion s(options_);
+  const size_t num_nodes = r->Count(kNodeBytes, "nodes");
+  for (size_t k = 0; k < num_nodes; ++k) {
+    Node n;
+    n.utime = r->Get<int64_t>("node.utime");
+    if (!s.nodes_.empty() && n.utime <= s.nodes_.back().utime) {
+      r->Fail("node " + std::to_string(k) + ": its utime is not after the previous node's");
+    }
+    n.T_map_base_rbpf = GetFinitePose(r, "node.T_map_base_rbpf");
+    n.state = GetFiniteMatrix<3, 1>(r, "node.state");
+    n.fixed = r->GetBool("node.fixed");
+    s.nodes_.push_back(std::move(n));
+  }
+  const int n = static_cast<int>(num_nodes);
+  const size_t num_factors = r->Count(kFactorBytes, "factors");
+  s.factors_.reserve(num_factors);
+  for (size_t k = 0; k < num_factors; ++k) {
+    Factor f;
+    f.i = r->Get<int32_t>("factor.i");
+    f.j = r->Get<int32_t>("factor.j");
+    if (f.i < 0 || f.i >= n || f.j < -1 || f.j >= n || f.i == f.j) {
+      r->Fail("factor " + std::to_string(k) + " joins nodes " + std::to_string(f.i) + " and " +
+              std::to_string(f.j) + " of " + std::to_string(n));
+    }
+    f.T_i_j = GetFinitePose(r, "factor.T_i_j");
+    f.information = GetFiniteMatrix<3, 3>(r, "factor.information");
+    f.sqrt_information = GetFiniteMatrix<3, 3>(r, "factor.sqrt_information");
+    f.source = GetSource(r, "factor.source");
+    f.is_loop_closure = r->GetBool("factor.is_loop_closure");
+    f.is_prior = r->GetBool("factor.is_prior");
+    if (f.is_prior != (f.j < 0)) r->Fail("factor " + std::to_string(k) + ": a prior has no j");
+    s.MakeCost(&f);
+    s.nodes_[f.i].factors.push_back(static_cast<int>(k));
+    if (f.j >= 0) s.nodes_[f.j].factors.push_back(static_cast<int>(k));
+    s.factors_.push_back(std::move(f));
+  }
+  const size_t num_pending = r->Count(kPendingBytes, "pending factors");
+  for (size_t k = 0; k < num_pending; ++k) {
+    PendingFactor p;
+    p.factor = GetRelativePoseFactor(r);
+    p.T_i_j = GetFinitePose(r, "pending.T_i_j (planar)");
+    p.information = GetFiniteMatrix<3, 3>(r, "pending.information (planar)");
+    s.pending_.push_back(std::move(p));
+  }
+  const size_t num_odometry = r->Count(kPoseSampleBytes, "odometry samples");
+  for (size_t k = 0; k < num_odometry; ++k) {
+    OdomSample o;
+    o.utime = r->Get<int64_t>("odometry.utime");
+    o.T_odom_base = GetFinitePose(r, "odometry.T_odom_base");
+    if (!s.odometry_.empty() && o.utime <= s.odometry_.back().utime) {
+      r->Fail("odometry sample " + std::to_string(k) + " is not after the previous one");
+    }
+    s.odometry_.push_back(o);
+  }
+  const size_t num_late = r->Count(8, "late laser pose stamps");
+  for (size_t k = 0; k < num_late; ++k) s.late_placed_.insert(r->Get<int64_t>("late stamp"));
+  const size_t num_retired = r->Count(kRetiredBytes, "retired nodes");
+  for (size_t k = 0; k < num_retired; ++k) {
+    RetiredNode rn;
+    rn.utime = r->Get<int64_t>("retired.utime");
+    rn.T_map_base = GetFinitePose(r, "retired.T_map_base");
+    rn.T_map_base_rbpf = GetFinitePose(r, "retired.T_map_base_rbpf");
+    rn.anchor_utime = r->Get<int64_t>("retired.anchor_utime");
+    if (!s.retired_.empty() && rn.utime <= s.retired_.back().utime) {
+      r->Fail("retired node " + std::to_string(k) + " is not after the previous one");
+    }
+    s.retired_.push_back(rn);
+  }
+  s.next_odom_pair_ = r->Get<int32_t>("next_odom_pair");
+  s.oldest_touched_node_ = r->Get<int32_t>("oldest_touched_node");
+  s.full_solve_requested_ = r->GetBool("full_solve_requested");
+  s.nodes_at_last_full_solve_ = r->Get<int64_t>("nodes_at_last_full_solve");
+  s.num_fixed_ = r->Get<int32_t>("num_fixed");
+  s.optimised_until_ = r->Get<int64_t>("optimised_until");
+  r->Get(&s.latest_covariance_, "latest_covariance");
+  s.last_summary_ = GetSummary(r);
+  ForEachCounter(&s.counters_, [r](int64_t* v) { *v = r->Get<int64_t>("counter"); });
+  // What the graph's code takes for granted.
+  if (s.next_odom_pair_ < 1 || s.next_odom_pair_ > n + 1 || s.oldest_touched_node_ < -1 ||
+      s.oldest_touched_node_ >= n || s.num_fixed_ < 0 || s.num_fixed_ > n) {
+    r->Fail("its graph indices (odometry pair, oldest touched node, map nodes) are out of range");
+  }
+  for (int k = 0; k < n; ++k) {
+    if (s.nodes_[k].fixed != (k < s.num_fixed_)) {
+      r->Fail("node " + std::to_string(k) + ": the map nodes must come first");
+    }
+  }
+  if (!s.retired_.empty() && s.num_fixed_ < n &&
+      s.retired_.back().utime >= s.nodes_[s.num_fixed_].utime) {
+    r->Fail("the retired nodes must be older than the active ones");
+  }
+  for (const RetiredNode& rn : s.retired_) {
+    const auto it = std::lower_bound(
+        s.nodes_.begin(), s.nodes_.begin() + s.num_fixed_, rn.anchor_utime,
+        [](const Node& node, Utime time) { return node.utime < time; });
+    if (it == s.nodes_.begin() + s.num_fixed_ || it->utime != rn.anchor_utime) {
+      r->Fail("retired node at utime " + std::to_string(rn.utime) + ": no map node at its anchor");
+    }
+  }
+  *this = std::move(s);
 }
 
 }  // namespace fl::fusion

@@ -166,4 +166,73 @@ int PointMap::MergeFinalKeyframes(const std::function<bool(Utime, Pose2*)>& pose
 int PointMap::num_keyframes() const { return static_cast<int>(impl_->keyframes.size()); }
 int64_t PointMap::stored_points() const { return impl_->points; }
 
+namespace {
+constexpr char kMapStateMagic[] = "FLPTMAP_";
+constexpr uint32_t kMapStateVersion = 1;
+}  // namespace
+
+void PointMap::SaveState(StateWriter* w) const {
+  w->Begin(kMapStateMagic, kMapStateVersion);
+  w->PutCount(impl_->keyframes.size());
+  for (const auto& [utime, cloud] : impl_->keyframes) {
+    w->Put(utime);
+    w->PutCount(cloud->size());
+    for (const auto& p : cloud->points) {
+      w->Put(p.x);
+      w->Put(p.y);
+      w->Put(p.z);
+    }
+  }
+  w->PutCount(impl_->final_poses.size());
+  for (const auto& [utime, pose] : impl_->final_poses) {
+    w->Put(utime);
+    w->Put(pose);
+  }
+  w->Put(dropped_points_);
+  w->Put(merged_keyframes_);
+}
+
+void PointMap::LoadState(StateReader* r) {
+  r->Begin(kMapStateMagic, kMapStateVersion);
+  auto impl = std::make_unique<Impl>();
+  const size_t num_keyframes = r->Count(16, "map keyframes");
+  for (size_t k = 0; k < num_keyframes; ++k) {
+    const Utime utime = r->Get<int64_t>("map keyframe utime");
+    const size_t n = r->Count(12, "map keyframe points");
+    auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+    cloud->points.reserve(n);
+    const float max_range = static_cast<float>(options_.max_range_m);
+    for (size_t i = 0; i < n; ++i) {
+      const float x = r->Get<float>("point"), y = r->Get<float>("point"), z = r->Get<float>("point");
+      // What AddKeyframe keeps (finite, within max_range_m), as the voxel filter assumes.
+      if (!(Eigen::Vector3f(x, y, z).norm() <= max_range)) {
+        r->Fail("map keyframe at utime " + std::to_string(utime) + ": a point is not finite or " +
+                "beyond max_range_m");
+      }
+      cloud->points.emplace_back(x, y, z);
+    }
+    cloud->width = static_cast<uint32_t>(cloud->points.size());
+    cloud->height = 1;
+    if (!impl->keyframes.emplace(utime, cloud).second) {
+      r->Fail("two map keyframes at utime " + std::to_string(utime));
+    }
+    impl->points += static_cast<int64_t>(n);
+  }
+  const size_t num_final = r->Count(32, "final map keyframe poses");
+  for (size_t k = 0; k < num_final; ++k) {
+    const Utime utime = r->Get<int64_t>("final pose utime");
+    const Pose2 pose = r->GetPose2("final pose");
+    if (!std::isfinite(pose.x) || !std::isfinite(pose.y) || !std::isfinite(pose.theta)) {
+      r->Fail("final pose of the map keyframe at utime " + std::to_string(utime) +
+              " is not finite");
+    }
+    impl->final_poses[utime] = pose;
+  }
+  const int64_t dropped = r->Get<int64_t>("dropped points");
+  const int64_t merged = r->Get<int64_t>("merged keyframes");
+  impl_ = std::move(impl);
+  dropped_points_ = dropped;
+  merged_keyframes_ = merged;
+}
+
 }  // namespace fl::fusion

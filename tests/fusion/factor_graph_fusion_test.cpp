@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <memory>
 #include <random>
 
@@ -831,6 +833,122 @@ TEST(FusionFactorGraph, BoundedGraphIsAsAccurateAsTheFullOneOnNoisyData) {
     EXPECT_LT(e_bounded, 1.5 * e_full + 0.02)
         << "seed " << seed << ": full " << e_full << " m, bounded " << e_bounded << " m";
   }
+}
+
+// Feeds steps [first, last) of `d` (laser poses, exact wheel odometry from the truth, laser
+// and vision factors) with an Update after each node and the full solves it asks for.
+void FeedSteps(const FusionSimData& d, size_t first, size_t last, FactorGraphFusion* fusion) {
+  for (size_t k = first; k < last; ++k) {
+    const Utime t = d.rbpf[k].utime;
+    ASSERT_TRUE(fusion->AddOdometry(t, d.truth[k].T_map_base).ok());
+    ASSERT_TRUE(fusion->AddLaserPose(t, d.rbpf[k].T_map_base).ok());
+    for (const auto* factors : {&d.laser_factors, &d.vision_factors}) {
+      for (const RelativePoseFactor& f : *factors) {
+        const Utime prev = k == 0 ? 0 : d.rbpf[k - 1].utime;
+        if (f.utime_j > prev && f.utime_j <= t) {
+          ASSERT_TRUE(fusion->AddFactor(f).ok());
+        }
+      }
+    }
+    fusion->Update();
+    if (fusion->full_solve_requested()) fusion->FullSolve();
+  }
+}
+
+TEST(FusionFactorGraph, ASavedStateGoesOnExactlyAsTheOriginal) {
+  // Noisy factors, wheel odometry, a 30 s active window (retired and map nodes), saved after
+  // 2.5 of 4 laps and loaded into a new fusion: given the same inputs, both end bit-identical.
+  FusionSimOptions so;
+  so.laps = 4;
+  so.laser_sigma_xy = 0.01;
+  so.laser_sigma_theta = 0.003;
+  so.vision_sigma_xy = 0.02;
+  so.vision_sigma_theta = 0.005;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FusionOptions o = TestOptions();
+  o.use_wheel_odometry = true;
+  o.full_solve_every_n_nodes = 100;
+  o.max_window_nodes = 100;
+  o.active_window_s = 30.0;
+  FactorGraphFusion original(o);
+  const size_t half = d.rbpf.size() * 5 / 8;
+  FeedSteps(d, 0, half, &original);
+  ASSERT_GT(original.num_retired_nodes(), 100);
+  ASSERT_GT(original.num_map_nodes(), 5);
+  StateWriter w;
+  original.SaveState(&w);
+  const std::vector<uint8_t> bytes = w.Release();
+  FactorGraphFusion loaded(o);
+  StateReader r(bytes.data(), bytes.size());
+  loaded.LoadState(&r);
+  EXPECT_EQ(loaded.num_nodes(), original.num_nodes());
+  EXPECT_EQ(loaded.num_factors(), original.num_factors());
+  EXPECT_EQ(loaded.num_retired_nodes(), original.num_retired_nodes());
+
+  FeedSteps(d, half, d.rbpf.size(), &original);
+  FeedSteps(d, half, d.rbpf.size(), &loaded);
+  for (const auto& f : d.loop_factors) {
+    ASSERT_TRUE(original.AddFactor(f).ok());
+    ASSERT_TRUE(loaded.AddFactor(f).ok());
+  }
+  original.FullSolve();
+  loaded.FullSolve();
+  const auto a = original.Trajectory(), b = loaded.Trajectory();
+  ASSERT_EQ(a.size(), d.truth.size());
+  ASSERT_EQ(b.size(), a.size());
+  for (size_t k = 0; k < a.size(); ++k) {
+    ASSERT_EQ(a[k].utime, b[k].utime);
+    ASSERT_EQ(a[k].T_map_base.x, b[k].T_map_base.x) << k;
+    ASSERT_EQ(a[k].T_map_base.y, b[k].T_map_base.y) << k;
+    ASSERT_EQ(a[k].T_map_base.theta, b[k].T_map_base.theta) << k;
+  }
+  EXPECT_EQ(loaded.latest_covariance(), original.latest_covariance());
+  EXPECT_EQ(loaded.counters().factors_added, original.counters().factors_added);
+  EXPECT_EQ(loaded.counters().odometry_factors, original.counters().odometry_factors);
+  EXPECT_EQ(loaded.counters().merged_nodes, original.counters().merged_nodes);
+  EXPECT_EQ(loaded.num_map_nodes(), original.num_map_nodes());
+}
+
+TEST(FusionFactorGraph, ADamagedSavedStateIsRefusedAndChangesNothing) {
+  FusionSimOptions so;
+  so.laps = 2;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FusionOptions o = TestOptions();
+  o.use_wheel_odometry = true;
+  o.active_window_s = 10.0;
+  FactorGraphFusion original(o);
+  FeedSteps(d, 0, d.rbpf.size() / 2, &original);
+  StateWriter w;
+  original.SaveState(&w);
+  const std::vector<uint8_t> bytes = w.Release();
+  FactorGraphFusion other(o);
+  FeedSteps(d, 0, 10, &other);
+  const auto before = other.Trajectory();
+  // Every truncation is an error, and the fusion it was loaded into is unchanged.
+  for (size_t n = 0; n < bytes.size(); n += 1 + n / 16) {
+    StateReader r(bytes.data(), n);
+    EXPECT_THROW(other.LoadState(&r), StateError) << n << " of " << bytes.size() << " bytes";
+  }
+  // A node index out of range, a NaN, a count beyond the buffer: refused, named.
+  std::vector<uint8_t> bad = bytes;
+  const size_t nodes_at = 16;  // after the magic, byte-order mark and version
+  const uint64_t huge = uint64_t{1} << 62;
+  std::memcpy(bad.data() + nodes_at, &huge, sizeof(huge));
+  StateReader r1(bad.data(), bad.size());
+  try {
+    other.LoadState(&r1);
+    FAIL() << "a node count of 2^62 was read";
+  } catch (const StateError& e) {
+    EXPECT_NE(std::string(e.what()).find("nodes: a count of"), std::string::npos) << e.what();
+  }
+  bad = bytes;
+  const double nan = std::nan("");
+  std::memcpy(bad.data() + nodes_at + 8 + 8, &nan, sizeof(nan));  // node 0's T_map_base_rbpf.x
+  StateReader r2(bad.data(), bad.size());
+  EXPECT_THROW(other.LoadState(&r2), StateError);
+  const auto after = other.Trajectory();
+  ASSERT_EQ(after.size(), before.size());
+  for (size_t k = 0; k < after.size(); ++k) EXPECT_EQ(after[k].T_map_base.x, before[k].T_map_base.x);
 }
 
 TEST(FusionFactorGraph, OptionsValidateWithClearErrors) {

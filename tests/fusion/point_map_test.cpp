@@ -130,5 +130,41 @@ TEST(FusionPointMap, FinalKeyframesOfAMappedViewAreDroppedAndTheMapStaysTheSame)
   }
 }
 
+TEST(FusionPointMap, ASavedMapComesBackTheSame) {
+  PointMapOptions o;
+  o.voxel_size_m = 0.1;
+  o.merge_spacing_m = 0.5;
+  PointMap map(o);
+  for (int k = 0; k < 6; ++k) {
+    std::vector<Eigen::Vector3f> points;
+    for (int i = 0; i < 50; ++i) points.emplace_back(1.0f + 0.1f * i, 0.3f * k, 0.5f);
+    points.emplace_back(NAN, 0.0f, 0.0f);  // dropped, counted
+    ASSERT_TRUE(map.AddKeyframe(100 * (k + 1), points).ok());
+  }
+  const auto pose_at = [](Utime t, Pose2* p) {
+    *p = Pose2(t < 400 ? 0.0 : 0.1, 0.0, 0.0);  // 400-600 revisit the place of 100
+    return true;
+  };
+  ASSERT_GT(map.MergeFinalKeyframes(pose_at, 450), 0);
+  StateWriter w;
+  map.SaveState(&w);
+  const std::vector<uint8_t> bytes = w.Release();
+  PointMap loaded(o);
+  StateReader r(bytes.data(), bytes.size());
+  loaded.LoadState(&r);
+  EXPECT_EQ(loaded.num_keyframes(), map.num_keyframes());
+  EXPECT_EQ(loaded.stored_points(), map.stored_points());
+  EXPECT_EQ(loaded.dropped_points(), map.dropped_points());
+  EXPECT_EQ(loaded.merged_keyframes(), map.merged_keyframes());
+  EXPECT_EQ(loaded.Build(pose_at), map.Build(pose_at));
+  // The kept final keyframes came back too: the same merges follow.
+  EXPECT_EQ(loaded.MergeFinalKeyframes(pose_at, 700), map.MergeFinalKeyframes(pose_at, 700));
+  EXPECT_EQ(loaded.num_keyframes(), map.num_keyframes());
+  // Truncated: refused, the map unchanged.
+  StateReader t(bytes.data(), bytes.size() - 1);
+  EXPECT_THROW(loaded.LoadState(&t), StateError);
+  EXPECT_EQ(loaded.num_keyframes(), map.num_keyframes());
+}
+
 }  // namespace
 }  // namespace fl::fusion

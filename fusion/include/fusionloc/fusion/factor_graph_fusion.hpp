@@ -113,6 +113,7 @@
 #include <vector>
 
 #include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/state_buffer.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
 
@@ -339,6 +340,15 @@ class FactorGraphFusion {
   const SolveSummary& last_summary() const { return last_summary_; }
   const FusionOptions& options() const { return options_; }
 
+  // Saved state (the fusion process's journal snapshot, FUSION.md "Respawn"): everything later
+  // calls depend on (nodes, factors, pending factors, odometry, retired nodes, counters), so
+  // that a fusion loaded from it and given the same inputs goes on exactly as this one would.
+  // The options are not saved: the loader's are used (the caller checks they are the same).
+  // Not while a full-solve job is outstanding (std::logic_error). LoadState replaces this
+  // object's state, or throws StateError (naming the byte offset) and leaves it unchanged.
+  void SaveState(StateWriter* out) const;
+  void LoadState(StateReader* in);
+
  private:
   struct Node {
     Utime utime = 0;
@@ -358,6 +368,7 @@ class FactorGraphFusion {
     int i = -1, j = -1;  // node indices; j = -1 for the prior
     Pose2 T_i_j;
     Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
+    Eigen::Matrix3d sqrt_information = Eigen::Matrix3d::Zero();  // the cost's (MakeCost)
     FactorSource source = FactorSource::kLaser;
     bool is_loop_closure = false;
     bool is_prior = false;
@@ -376,6 +387,9 @@ class FactorGraphFusion {
   };
 
   Status Reject(int64_t* counter, const std::string& message);
+  // The cost and loss of `f` from its T_i_j, sqrt_information, source and is_prior: a prior
+  // holds node i at T_i_j; wheel odometry is not robustified.
+  void MakeCost(Factor* f) const;
   // Resolves a time to a node and the correction T_node_t; false if no node is near.
   bool Attach(Utime t, int* node, Pose2* T_node_t) const;
   Status AttachFactor(const RelativePoseFactor& f, const Pose2& T_i_j,
@@ -386,7 +400,7 @@ class FactorGraphFusion {
   void AddChainFactor(int j);  // between nodes j-1 and j, from their RBPF poses
   // Between-factor (j-1, j) with a diagonal noise model.
   void AddSequentialFactor(int j, const Pose2& motion, double sigma_xy, double sigma_theta,
-                           FactorSource source, std::shared_ptr<ceres::LossFunction> loss);
+                           FactorSource source);
   bool OdometryAt(Utime t, Pose2* T_odom_base) const;
   SolveSummary SolveWindow(int first_node);
   // Nodes (from `first` on) that no factor touches are placed by the RBPF's relative motion

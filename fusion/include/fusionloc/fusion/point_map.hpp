@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "fusionloc/common/geometry.hpp"
+#include "fusionloc/common/state_buffer.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
 
@@ -67,6 +68,11 @@ class PointMap {
   // merge_spacing_m and merge_spacing_rad of it (that view is already in the map), removed.
   // Returns the number removed.
   int MergeFinalKeyframes(const std::function<bool(Utime, Pose2*)>& pose_at, Utime final_until);
+
+  // Saved state (the fusion process's journal snapshot): the keyframes, their final poses and
+  // the counters; LoadState replaces them or throws StateError and leaves this map unchanged.
+  void SaveState(StateWriter* out) const;
+  void LoadState(StateReader* in);
 
   int num_keyframes() const;
   int64_t merged_keyframes() const { return merged_keyframes_; }
