@@ -44,9 +44,10 @@ struct FusionRun {
 // Runs a live (memq://) FusionNode with `journal` over steps [first, last): exact wheel
 // odometry and the drifting RBPF poses. With `finish` the node finishes (a clean stop);
 // without, it is destroyed as a kill -9 would leave it (the journal is flushed per input).
-// `offset` [us] shifts every time (another run).
+// `offset` [us] shifts every time (another run); `snapshot_s`: the journal's snapshot period.
 FusionRun RunFusion(const std::string& journal, int first, int last, bool finish,
-                    Utime offset = 0) {
+                    Utime offset = 0, double snapshot_s = 120.0,
+                    const FusionProcessConfig& config = FusionProcessConfig()) {
   auto lcm = MakeLcm("memq://");
   FusionRun run;
   lcm->Subscribe<fusionloc::fused_pose_t>(
@@ -59,7 +60,8 @@ FusionRun RunFusion(const std::string& journal, int first, int last, bool finish
   options.map_out = "";
   options.sync_full_solve = true;
   options.journal = journal;
-  FusionNode node(FusionProcessConfig(), options, lcm.get(), ChannelMap());
+  options.journal_snapshot_s = snapshot_s;
+  FusionNode node(config, options, lcm.get(), ChannelMap());
   for (int k = first; k < last; ++k) {
     fusionloc::wheel_odometry_t odom{};
     odom.utime = StepTime(k, offset);
@@ -73,6 +75,7 @@ FusionRun RunFusion(const std::string& journal, int first, int last, bool finish
     lcm->Publish(channels::kRbpfPose, pose, pose.utime);
     while (lcm->HandleSubscriptions(0) > 0) {
     }
+    node.Poll();  // as the process loop does after every batch
   }
   if (finish) {
     node.Finish();
@@ -196,6 +199,75 @@ TEST(FusionNodeJournal, AnOldJournalOrAnotherRunsStartsANewGraph) {
   // Not a log at all: a new graph, and the file is replaced by a journal.
   std::ofstream(journal) << "garbage";
   after = RunFusion(journal, 20, kSteps, true);
+  ASSERT_FALSE(after.poses.empty());
+  EXPECT_EQ(after.poses.front().num_nodes, 1);
+}
+
+// The journal's events: channels in order.
+std::vector<std::string> JournalChannels(const std::string& journal) {
+  LcmLogReader reader(journal);
+  LcmLogEvent e;
+  std::vector<std::string> channels;
+  while (reader.Next(&e)) channels.push_back(e.channel);
+  EXPECT_EQ(reader.ProblemSummary(), "");
+  return channels;
+}
+
+TEST(FusionNodeJournal, SnapshotsBoundTheJournalAndARespawnGoesOnFromOne) {
+  test::TempDir dir;
+  const FusionRun calm = RunFusion("", 0, kSteps, true);
+  // A snapshot every 0.5 s of data (5 steps): the journal is the last snapshot and the inputs
+  // since, however long the run.
+  const std::string journal = dir.file("fusion.journal");
+  RunFusion(journal, 0, 20, false, 0, 0.5);
+  std::vector<std::string> channels = JournalChannels(journal);
+  ASSERT_FALSE(channels.empty());
+  EXPECT_EQ(channels.front(), FusionNode::kJournalSnapshotChannel);
+  EXPECT_LE(channels.size(), 1u + 2 * 5);
+  EXPECT_EQ(std::count(channels.begin(), channels.end(), FusionNode::kJournalSnapshotChannel), 1);
+  const std::string long_run = dir.file("long.journal");
+  RunFusion(long_run, 0, 400, false, 0, 0.5);
+  EXPECT_LE(JournalChannels(long_run).size(), 1u + 2 * 5);
+
+  // Killed after 20 steps, respawned: it goes on from the snapshot and the inputs after it,
+  // and ends with the undisturbed trajectory.
+  const FusionRun after = RunFusion(journal, 20, kSteps, true, 0, 0.5);
+  ASSERT_EQ(after.poses.size(), static_cast<size_t>(kSteps - 20));
+  EXPECT_LT(Distance(after.poses.front(), TruePose(20)), 1e-3);
+  EXPECT_GE(after.poses.back().num_nodes, kSteps);
+  ASSERT_FALSE(after.trajectories.empty());
+  const auto& a = calm.trajectories.back();
+  const auto& b = after.trajectories.back();
+  ASSERT_EQ(a.num_poses, b.num_poses);
+  for (int i = 0; i < a.num_poses; ++i) {
+    EXPECT_EQ(a.utimes[i], b.utimes[i]);
+    EXPECT_NEAR(a.x[i], b.x[i], 1e-4) << i;
+    EXPECT_NEAR(a.y[i], b.y[i], 1e-4) << i;
+    EXPECT_NEAR(a.theta[i], b.theta[i], 1e-4) << i;
+  }
+}
+
+TEST(FusionNodeJournal, ASnapshotOfAnotherConfigOrDamagedStartsANewGraph) {
+  test::TempDir dir;
+  const std::string journal = dir.file("fusion.journal");
+  // Made with another configuration: its state is not this fusion's.
+  FusionProcessConfig other;
+  other.graph.window_size = 7;
+  RunFusion(journal, 0, 20, false, 0, 0.5, other);
+  FusionRun after = RunFusion(journal, 20, kSteps, true, 0, 0.5);
+  ASSERT_FALSE(after.poses.empty());
+  EXPECT_EQ(after.poses.front().num_nodes, 1);
+  EXPECT_LT(Distance(after.poses.front(), RbpfPose(20)), 1e-6);
+  // A damaged snapshot (its first byte): a new graph, not the inputs after it alone.
+  std::filesystem::remove(journal);
+  RunFusion(journal, 0, 20, false, 0, 0.5);
+  {
+    std::fstream f(journal, std::ios::in | std::ios::out | std::ios::binary);
+    const std::string channel = FusionNode::kJournalSnapshotChannel;
+    f.seekp(static_cast<std::streamoff>(28 + channel.size()));  // the event's data
+    f.put('X');
+  }
+  after = RunFusion(journal, 20, kSteps, true, 0, 0.5);
   ASSERT_FALSE(after.poses.empty());
   EXPECT_EQ(after.poses.front().num_nodes, 1);
 }

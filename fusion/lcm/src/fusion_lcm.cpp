@@ -2,8 +2,10 @@
 
 #include <atomic>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include "fusionloc/common/channels.hpp"
@@ -11,6 +13,8 @@
 #include "fusionloc/common/log.hpp"
 #include "fusionloc/common/message_checks.hpp"
 #include "fusionloc/common/robot_description_lcm.hpp"
+#include "fusionloc/common/state_buffer.hpp"
+#include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/fused_pose_t.hpp"
 #include "fusionloc/maps/map_export.hpp"
 #include "fusionloc/status_t.hpp"
@@ -78,6 +82,15 @@ void FusionNodeOptions::AddFlags(CommandLine* cli) {
                "--journal-max-age-s (a respawn after a crash) replay it first and go on with the "
                "same graph and map");
   cli->AddFlag("journal-max-age-s", &journal_max_age_s, "[s] oldest journal that is replayed");
+  cli->AddFlag("journal-snapshot-s", &journal_snapshot_s,
+               "[s] of data time between journal snapshots (the saved state, then the inputs "
+               "since: the journal and a respawn's replay stay bounded); 0 = never");
+  cli->AddCheck([this] {
+    return journal_max_age_s >= 0.0 && journal_snapshot_s >= 0.0 &&
+                   std::isfinite(journal_max_age_s) && std::isfinite(journal_snapshot_s)
+               ? std::string()
+               : std::string("--journal-max-age-s and --journal-snapshot-s must be >= 0");
+  });
 }
 
 std::vector<ChannelSpec> FusionNode::Inputs() {
@@ -212,9 +225,25 @@ void FusionNode::RestoreFromJournal() {
   }
   if (events.empty()) return;
   const auto t0 = std::chrono::steady_clock::now();
+  size_t first_input = 0;
+  std::string from_snapshot;
+  if (events.front().channel == kJournalSnapshotChannel) {
+    try {
+      LoadState(events.front().data);
+      first_input = 1;
+      from_snapshot = "a snapshot of " + std::to_string(fusion_.num_nodes()) + " nodes and " +
+                      std::to_string(fusion_.num_retired_nodes()) + " retired, then ";
+    } catch (const std::exception& ex) {
+      FL_LOG(WARN) << "journal " << path << ": its snapshot cannot be used (" << ex.what()
+                   << "): starting a new graph";
+      Reset();
+      return;
+    }
+  }
   restoring_ = true;
   int64_t used = 0;
-  for (const LcmLogEvent& e : events) {
+  for (size_t k = first_input; k < events.size(); ++k) {
+    const LcmLogEvent& e = events[k];
     const auto it = journal_handlers_.find(e.channel);
     if (it != journal_handlers_.end() && it->second(e.data.data(), static_cast<int>(e.data.size())))
       ++used;
@@ -225,12 +254,15 @@ void FusionNode::RestoreFromJournal() {
   last_full_ = full;
   restored_ = true;
   restored_until_ = last_utime_;
+  last_snapshot_utime_ = last_utime_;
   const double ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  FL_LOG(INFO) << "restored from the journal " << path << ": " << used << " inputs, "
+  FL_LOG(INFO) << "restored from the journal " << path << ": " << from_snapshot << used
+               << " inputs, "
                << fusion_.num_nodes() << " nodes, " << fusion_.num_factors() << " factors, "
                << map_.num_keyframes() << " map keyframes, in " << static_cast<int>(ms)
                << " ms; going on with the same graph (" << full.ToString() << ")";
+  restored_inputs_ = used;
   status_.Set("restored_inputs", static_cast<double>(used));
 }
 
@@ -241,6 +273,86 @@ void FusionNode::Record(const std::string& channel, const void* data, int size) 
   } catch (const std::exception& e) {
     journal_warning_.Warn(std::string(e.what()) + "; the journal stops here");
     journal_writer_.reset();
+  }
+}
+
+namespace {
+constexpr char kNodeStateMagic[] = "FLFUSNOD";
+constexpr uint32_t kNodeStateVersion = 1;
+}  // namespace
+
+std::vector<uint8_t> FusionNode::SaveState() const {
+  StateWriter w;
+  w.Begin(kNodeStateMagic, kNodeStateVersion);
+  w.Put(ConfigText());
+  w.Put(last_utime_);
+  w.Put(last_trajectory_utime_);
+  w.Put(Eigen::Matrix4d(T_base_camera_.matrix()));
+  w.Put(static_cast<uint8_t>(have_camera_to_base_));
+  fusion_.SaveState(&w);
+  map_.SaveState(&w);
+  return w.Release();
+}
+
+void FusionNode::LoadState(const std::vector<uint8_t>& bytes) {
+  StateReader r(bytes.data(), bytes.size());
+  r.Begin(kNodeStateMagic, kNodeStateVersion);
+  if (r.GetString("config") != ConfigText()) {
+    throw std::runtime_error("it was made with another configuration (the fusion's YAML)");
+  }
+  const Utime last_utime = r.Get<int64_t>("last_utime");
+  const Utime last_trajectory_utime = r.Get<int64_t>("last_trajectory_utime");
+  Eigen::Matrix4d T_base_camera;
+  r.Get(&T_base_camera, "T_base_camera");
+  if (!T_base_camera.allFinite()) r.Fail("T_base_camera is not finite");
+  const bool have_camera_to_base = r.GetBool("have_camera_to_base");
+  FactorGraphFusion fusion(config_.graph);
+  fusion.LoadState(&r);
+  PointMap map(config_.map);
+  map.LoadState(&r);
+  r.End("fusion node state");
+  fusion_ = std::move(fusion);
+  map_ = std::move(map);
+  last_utime_ = last_utime;
+  last_trajectory_utime_ = last_trajectory_utime;
+  T_base_camera_.matrix() = T_base_camera;
+  have_camera_to_base_ = have_camera_to_base;
+}
+
+std::string FusionNode::ConfigText() const {
+  YAML::Emitter out;
+  YamlWriteArchive archive(&out);
+  const_cast<FusionProcessConfig&>(config_).Serialize(&archive);
+  return out.c_str();
+}
+
+void FusionNode::SnapshotJournal() {
+  snapshot_due_ = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string& path = node_options_.journal;
+  const std::string fresh = path + ".new";
+  try {
+    const std::vector<uint8_t> bytes = SaveState();
+    auto writer = std::make_unique<LcmLogWriter>(fresh, /*atomic=*/false);
+    writer->Write(kJournalSnapshotChannel, bytes.data(), static_cast<int>(bytes.size()),
+                  lcm_->Now());
+    writer->Flush();
+    if (std::rename(fresh.c_str(), path.c_str()) != 0) {
+      throw std::runtime_error("cannot rename " + fresh + " to " + path + ": " +
+                               std::strerror(errno));
+    }
+    journal_writer_ = std::move(writer);
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    status_.Set("journal_snapshot_mb", static_cast<double>(bytes.size()) / 1e6);
+    status_.SetTiming("journal_snapshot_ms", ms);
+    FL_LOG(DEBUG) << "journal " << path << ": snapshot of " << bytes.size() << " bytes in "
+                  << ms << " ms";
+  } catch (const std::exception& e) {
+    std::error_code ec;
+    std::filesystem::remove(fresh, ec);
+    snapshot_warning_.Warn("journal " + path + ": no snapshot (" + e.what() +
+                           "); the journal goes on growing with every input");
   }
 }
 
@@ -270,6 +382,7 @@ void FusionNode::Poll() {
     FinishFullSolve();
   }
   if (g_save_map_requested.exchange(false)) SaveMap();
+  if (snapshot_due_ && journal_writer_ && !job_future_.valid()) SnapshotJournal();
 }
 
 void FusionNode::Finish() {
@@ -347,6 +460,13 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   if (fusion_.full_solve_requested() && !job_future_.valid()) StartFullSolve();
   if (UtimeToSeconds(m.utime - last_trajectory_utime_) >= config_.trajectory_period_s) {
     PublishTrajectory(m.utime);
+  }
+  if (journal_writer_ && node_options_.journal_snapshot_s > 0.0) {
+    if (last_snapshot_utime_ == 0 || m.utime < last_snapshot_utime_) last_snapshot_utime_ = m.utime;
+    if (UtimeToSeconds(m.utime - last_snapshot_utime_) >= node_options_.journal_snapshot_s) {
+      last_snapshot_utime_ = m.utime;
+      snapshot_due_ = true;  // at the next Poll(), after this message is in the journal
+    }
   }
   const double ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();

@@ -47,10 +47,16 @@ struct FusionNodeOptions {
   // journal_max_age_s replays it through the same handlers without publishing, solves the
   // whole graph once, and goes on with the graph, the map frame and the 3D map it had. A
   // journal that is older, unreadable, or whose data time lies ahead of the live data (another
-  // run) is set aside and a new graph is started. About 0.6 MB per minute with stereo at 2 Hz.
+  // run) is set aside and a new graph is started. Its size: the last snapshot
+  // (journal_snapshot_s) and the inputs since, about 0.4 MB per minute with stereo at 2 Hz.
   // "" = none.
   std::string journal;
   double journal_max_age_s = 30.0;  // [s] wall-clock age of a usable journal
+  // [s] of data time between journal snapshots: the journal is rewritten as the fusion's saved
+  // state (graph, retired trajectory, 3D map; channel kJournalSnapshotChannel) followed by the
+  // inputs taken since, so that its size and a respawn's replay are bounded by the state and
+  // this period instead of growing with the run. 0 = never (every input since the start).
+  double journal_snapshot_s = 120.0;
 
   void AddFlags(CommandLine* cli);
 };
@@ -58,6 +64,9 @@ struct FusionNodeOptions {
 class FusionNode : public LcmNode {
  public:
   static constexpr const char* kProgram = "fl-fusion";
+  // The journal's first event, when it holds a snapshot (FusionNodeOptions::journal_snapshot_s);
+  // never published on the bus.
+  static constexpr const char* kJournalSnapshotChannel = "FL_FUSION_JOURNAL_SNAPSHOT";
   static std::vector<ChannelSpec> Inputs();
   static std::vector<ChannelSpec> Outputs();
   // Asks every FusionNode to save its map at its next Poll() (async-signal-safe: SIGUSR1).
@@ -74,6 +83,9 @@ class FusionNode : public LcmNode {
   std::string Summary() const override;
   // The last map save's error ("" if it succeeded or none was asked for).
   std::string Failure() const override { return map_save_failure_; }
+  // The graph (read-only: what a journal restore brought back, for benchmarks and tests).
+  const FactorGraphFusion& fusion() const { return fusion_; }
+  int64_t restored_inputs() const { return restored_inputs_; }  // journal inputs replayed
 
  private:
   void OnLaserPose(const bot_core::pose_t& m);
@@ -95,6 +107,14 @@ class FusionNode : public LcmNode {
   // appending; Record() appends one input.
   void RestoreFromJournal();
   void Record(const std::string& channel, const void* data, int size);
+  // The node's state (its config, its own fields, the graph and the map) as snapshot bytes,
+  // and back (throws StateError, or std::runtime_error for another config).
+  std::vector<uint8_t> SaveState() const;
+  void LoadState(const std::vector<uint8_t>& bytes);
+  // Rewrites the journal as a snapshot (SaveState) followed by the inputs from now on; on a
+  // failure (a full disk) the journal goes on as it was, with an error logged.
+  void SnapshotJournal();
+  std::string ConfigText() const;  // the configuration as YAML (a snapshot must match it)
   // A new graph and map (a journal of another run).
   void Reset();
 
@@ -127,6 +147,10 @@ class FusionNode : public LcmNode {
   bool restoring_ = false;
   bool restored_ = false;     // the graph came from a journal, no live pose yet
   Utime restored_until_ = 0;  // data time of the journal's newest node
+  int64_t restored_inputs_ = 0;
+  Utime last_snapshot_utime_ = 0;  // data time of the last journal snapshot (or its start)
+  bool snapshot_due_ = false;      // taken at the next Poll() without a full solve running
+  RateLimitedWarning snapshot_warning_;  // a snapshot could not be written
   std::vector<uint8_t> encode_buffer_;
 };
 
