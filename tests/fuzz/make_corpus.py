@@ -120,6 +120,15 @@ def main():
         "image: @IMAGE@\nresolution: 0.1\norigin: [0, 0, 0]\nmode: scale\nnegate: 1\n",
         ("P2\n4 2\n255\n" + " ".join(str(v) for v in (0, 50, 128, 255, 255, 128, 50, 0)) + "\n").encode()))
 
+    # ---- fusion_state: [mode][state] (even) or [mode][edits: offset u16, byte] (odd) of the
+    # valid state the target makes itself (the layout is the C++ code's: not repeated here) ----
+    def edits(*pairs):
+        return b"\x01" + b"".join(struct.pack("<HB", at, v) for at, v in pairs)
+    write("fusion_state", "valid.bin", edits())
+    write("fusion_state", "node-count-high-byte.bin", edits((23, 0x7F)))
+    write("fusion_state", "version.bin", edits((12, 2)))
+    write("fusion_state", "raw-magic-only.bin", b"\x00FLFUSION")
+
     # ---- KITTI ----
     raw = os.path.join(data, "stereo", "kitti_raw_2011_09_26_drive_0001")
     odo = os.path.join(data, "lidar_stereo", "kitti_odometry_04_f000-050")

@@ -1,0 +1,132 @@
+// The fusion's saved state (fl-fusion's journal snapshot: FactorGraphFusion::LoadState, then
+// PointMap::LoadState, from one buffer as the node reads it). Input: [mode byte][rest].
+//  mode even: the rest is the state itself;
+//  mode odd:  the rest is edits [offset u16 LE][byte] applied to a valid state made by a small
+//             deterministic run (a fusion with retired and map nodes, odometry, a pending
+//             factor and a 3D map), so that the search starts from bytes that load.
+// Any bytes either load or throw StateError; a fusion and a map that load take new inputs,
+// solve, and give finite poses without crashing.
+#include <cmath>
+#include <vector>
+
+#include "../fuzz_entry.hpp"
+#include "fusionloc/fusion/factor_graph_fusion.hpp"
+#include "fusionloc/fusion/point_map.hpp"
+
+namespace {
+
+using fl::Pose2;
+using fl::Utime;
+using fl::fusion::FactorGraphFusion;
+using fl::fusion::FusionOptions;
+using fl::fusion::PointMap;
+using fl::fusion::PointMapOptions;
+using fl::fusion::RelativePoseFactor;
+
+constexpr Utime kStepUs = 500000;  // [us] between laser nodes
+
+FusionOptions Options() {
+  FusionOptions o;
+  o.active_window_s = 10.0;  // the shortest: nodes retire within the 30 s run
+  o.window_size = 5;
+  o.max_window_nodes = 10;
+  o.full_solve_every_n_nodes = 10;
+  return o;
+}
+
+Pose2 Truth(int k) { return Pose2(0.1 * k, 0.3 * std::sin(0.05 * k), 0.05 * std::sin(0.03 * k)); }
+
+// A valid state: 60 laser nodes at 2 Hz with odometry, laser factors, a factor still pending
+// (ahead of the newest node) and a 3D map keyframe every 10 nodes.
+const std::vector<uint8_t>& ValidState() {
+  static const std::vector<uint8_t> bytes = [] {
+    FactorGraphFusion fusion(Options());
+    PointMap map((PointMapOptions()));
+    for (int k = 0; k < 60; ++k) {
+      const Utime t = 1000000 + kStepUs * static_cast<Utime>(k);
+      (void)fusion.AddOdometry(t, Truth(k));
+      (void)fusion.AddLaserPose(t, Truth(k) * Pose2(0.001 * k, 0.0, 0.0005 * k));
+      if (k > 0) {
+        RelativePoseFactor f;
+        f.utime_i = t - kStepUs;
+        f.utime_j = t;
+        f.T_i_j = Truth(k - 1).between(Truth(k)).ToIsometry3();
+        f.information.diagonal() << 1e4, 1e4, 0, 0, 0, 1e5;
+        (void)fusion.AddFactor(f);
+      }
+      if (k % 10 == 0) {
+        (void)map.AddKeyframe(t, {Eigen::Vector3f(1.0f, 0.1f * k, 0.5f),
+                                  Eigen::Vector3f(2.0f, -0.2f, 0.3f)});
+      }
+      fusion.Update();
+      if (fusion.full_solve_requested()) fusion.FullSolve();
+    }
+    RelativePoseFactor ahead;
+    ahead.utime_i = 1000000 + kStepUs * 59;
+    ahead.utime_j = ahead.utime_i + 2 * kStepUs;
+    ahead.information.diagonal() << 1e4, 1e4, 0, 0, 0, 1e5;
+    (void)fusion.AddFactor(ahead);
+    FL_FUZZ_CHECK(fusion.num_retired_nodes() > 0 && fusion.num_map_nodes() > 0 &&
+                  fusion.num_pending_factors() == 1 && map.num_keyframes() > 0);
+    fl::StateWriter w;
+    fusion.SaveState(&w);
+    map.SaveState(&w);
+    return w.Release();
+  }();
+  return bytes;
+}
+
+}  // namespace
+
+int Fuzz_fusion_state(const uint8_t* data, size_t size) {
+  fl::fuzz::QuietLogs();
+  fl::fuzz::Input in(data, size);
+  const uint8_t mode = in.Byte();
+  std::vector<uint8_t> state;
+  const bool unedited = mode % 2 == 1 && in.empty();  // must load
+  if (mode % 2 == 0) {
+    const std::string_view rest = in.Rest();
+    state.assign(rest.begin(), rest.end());
+  } else {
+    state = ValidState();
+    while (!in.empty()) {
+      const size_t at = in.U16();
+      const uint8_t value = in.Byte();
+      if (!state.empty()) state[at % state.size()] = value;
+    }
+  }
+  FactorGraphFusion fusion(Options());
+  PointMap map((PointMapOptions()));
+  fl::StateReader r(state.data(), state.size());
+  try {
+    fusion.LoadState(&r);
+  } catch (const fl::StateError&) {
+    FL_FUZZ_CHECK(!unedited);
+    FL_FUZZ_CHECK(fusion.num_nodes() == 0 && fusion.num_factors() == 0);  // left unchanged
+    return 0;
+  }
+  try {
+    map.LoadState(&r);
+    r.End("fuzz state");
+  } catch (const fl::StateError&) {
+    FL_FUZZ_CHECK(!unedited);
+  }
+  // Loaded: it goes on.
+  const Utime newest = fusion.newest_node_utime();
+  if (newest < (Utime{1} << 60)) {
+    for (int k = 1; k <= 3; ++k) {
+      const Utime t = newest + kStepUs * k;
+      (void)fusion.AddOdometry(t, Pose2(0.1 * k, 0.0, 0.0));
+      (void)fusion.AddLaserPose(t, Pose2(0.1 * k, 0.0, 0.0));
+      fusion.Update();
+    }
+  }
+  fusion.FullSolve();
+  for (const auto& p : fusion.Trajectory()) (void)p;
+  fl::fusion::TrajectoryPoint latest;
+  (void)fusion.Latest(&latest);
+  (void)map.MergeFinalKeyframes([&](Utime t, Pose2* p) { return fusion.PoseAt(t, p); },
+                                fusion.final_until());
+  (void)map.Build([&](Utime t, Pose2* p) { return fusion.PoseAt(t, p); });
+  return 0;
+}
