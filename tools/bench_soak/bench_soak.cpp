@@ -13,7 +13,9 @@
 // has been mapped). Messages lost: what the simulator's schedule published minus what arrived
 // here. The online FUSED_POSE against GROUND_TRUTH: one SE(2) alignment over the run, the RMS
 // error overall and per minute (OUT/fused_ate_per_minute.csv). Every sample also goes to
-// OUT/samples.csv.
+// OUT/samples.csv. At the end, the journal the run left is restored the way a respawned
+// fl-fusion restores it (FusionNode, in this process, on a copy), timed: what a kill -9 at the
+// end of the run would cost (run "journal_restore").
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -37,6 +39,7 @@
 #include "fusionloc/common/yaml_options.hpp"
 #include "fusionloc/eval/metrics.hpp"
 #include "fusionloc/fused_pose_t.hpp"
+#include "fusionloc/fusion/fusion_lcm.hpp"
 #include "fusionloc/sim_pipeline/sim_pipeline.hpp"
 #include "fusionloc/status_t.hpp"
 
@@ -51,6 +54,7 @@ struct Setup {
   double sample_s = 60.0;
   int64_t seed = 1;
   int port = 7660;
+  double journal_snapshot_s = -1.0;  // fl-fusion --journal-snapshot-s (< 0: its default)
 };
 
 // A sampled size (status key or file size) and where it comes from.
@@ -66,6 +70,43 @@ double At(const std::vector<double>& t, const std::vector<double>& y, double t_f
     if (t[i] >= t_from) return y[i];
   }
   return std::nan("");
+}
+
+// The journal restored as a respawned fl-fusion restores it (FusionNode's constructor, here
+// on memq:// and a copy of the file), timed.
+fl::bench::Run RestoreJournal(const Setup& s, const std::string& journal) {
+  fl::bench::Run run;
+  run.name = "journal_restore";
+  run.input = journal;
+  std::error_code ec;
+  const auto bytes = std::filesystem::file_size(journal, ec);
+  if (ec) {
+    run.note = "no journal: " + ec.message();
+    return run;
+  }
+  const std::string copy = journal + ".restore-check";
+  std::filesystem::copy_file(journal, copy, std::filesystem::copy_options::overwrite_existing);
+  const auto config =
+      fl::LoadYamlFile<fl::fusion::FusionProcessConfig>(s.config_dir + "/fusion.yaml");
+  fl::fusion::FusionNodeOptions options;
+  options.map_out = "";
+  options.sync_full_solve = true;
+  options.journal = copy;
+  options.journal_max_age_s = 1e9;
+  auto lcm = fl::MakeLcm("memq://");
+  const double t0 = NowSeconds();
+  fl::fusion::FusionNode node(config, options, lcm.get(), fl::ChannelMap());
+  const double restore_s = NowSeconds() - t0;
+  std::filesystem::remove(copy, ec);
+  std::filesystem::remove(copy + ".new", ec);
+  run.Add("journal_mb", static_cast<double>(bytes) / 1048576.0)
+      .Add("restore_ms", 1e3 * restore_s)
+      .Add("restored_inputs", static_cast<double>(node.restored_inputs()))
+      .Add("restored_nodes", node.fusion().num_nodes())
+      .Add("restored_retired_nodes", static_cast<double>(node.fusion().num_retired_nodes()));
+  run.note = "replayed in-process as a respawned fl-fusion does: snapshot (if any), inputs "
+             "after it, one full solve";
+  return run;
 }
 
 int RunSoak(const Setup& s, fl::bench::Report* report) {
@@ -125,7 +166,10 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
         true},
        {"fusion",
         "${BIN}/fl-fusion --lcm-url=${URL} --config ${CONFIG}/fusion.yaml --map-out ${DIR}/map "
-        "--journal ${DIR}/fusion.journal",
+        "--journal ${DIR}/fusion.journal" +
+            (s.journal_snapshot_s >= 0.0
+                 ? " --journal-snapshot-s " + fl::FormatDouble(s.journal_snapshot_s)
+                 : std::string()),
         true},
        {"sim",
         "${BIN}/fl-sim --lcm-url=${URL} --robot ${CONFIG}/robot/sim.yaml --config ${DIR}/sim.yaml "
@@ -142,6 +186,8 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
       {"map_keyframes", fl::StatusChannel("fl-fusion"), "map_keyframes"},
       {"map_points", fl::StatusChannel("fl-fusion"), "map_points"},
       {"rbpf_keyframes", fl::StatusChannel("fl-rbpf-slam"), "keyframes"},
+      {"journal_snapshot_mb", fl::StatusChannel("fl-fusion"), "journal_snapshot_mb"},
+      {"journal_snapshot_ms", fl::StatusChannel("fl-fusion"), "journal_snapshot_ms"},
       {"journal_mb", "", ""}};
   std::vector<double> sample_t;                          // [min] since the simulator started
   std::map<std::string, std::vector<double>> rss, size;  // per process [MB] / per size
@@ -216,6 +262,7 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
   pipeline.StopAll();
   pipeline.Poll();
   if (fl::ShutdownRequested()) return fl::kExitFailure;
+  report->AddRun(RestoreJournal(s, dir + "/fusion.journal"));
 
   const double warm_min = warmup_s / 60.0;
   for (const auto& p : procs) {
@@ -336,6 +383,9 @@ int main(int argc, char** argv) {
                         "folder of rbpf_slam.yaml, stereo_vo.yaml, fusion.yaml, robot/sim.yaml");
   program.cli().AddFlag("out", &s.out_dir, "folder for the processes' logs, journal, map, samples");
   program.cli().AddFlag("port", &s.port, "UDP port of the benchmark's LCM (loopback, ttl=0)");
+  program.cli().AddFlag("journal-snapshot-s", &s.journal_snapshot_s,
+                        "fl-fusion --journal-snapshot-s for the run (0 = no snapshots: the journal "
+                        "holds every input); < 0 = fl-fusion's default");
   if (!program.Parse(argc, argv)) return program.exit_code();
   return program.Run([&] {
     if (!(s.minutes > 0.0 && s.minutes <= 24 * 60)) {
