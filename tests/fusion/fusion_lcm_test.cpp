@@ -119,6 +119,21 @@ double Distance(const fusionloc::fused_pose_t& m, const Pose2& T) {
   return std::hypot(m.x - T.x, m.y - T.y);
 }
 
+// The last FUSED_TRAJECTORY of both runs: the same stamps, poses within 0.1 mm.
+void ExpectSameFinalTrajectory(const FusionRun& expected, const FusionRun& actual) {
+  ASSERT_FALSE(expected.trajectories.empty());
+  ASSERT_FALSE(actual.trajectories.empty());
+  const auto& a = expected.trajectories.back();
+  const auto& b = actual.trajectories.back();
+  ASSERT_EQ(a.num_poses, b.num_poses);
+  for (int i = 0; i < a.num_poses; ++i) {
+    EXPECT_EQ(a.utimes[i], b.utimes[i]);
+    EXPECT_NEAR(a.x[i], b.x[i], 1e-4) << i;
+    EXPECT_NEAR(a.y[i], b.y[i], 1e-4) << i;
+    EXPECT_NEAR(a.theta[i], b.theta[i], 1e-4) << i;
+  }
+}
+
 TEST(FusionNodeJournal, ARespawnedFusionGoesOnWithItsGraph) {
   test::TempDir dir;
   // Undisturbed: the fused poses follow the odometry, not the drifting RBPF.
@@ -139,17 +154,7 @@ TEST(FusionNodeJournal, ARespawnedFusionGoesOnWithItsGraph) {
   EXPECT_LT(Distance(after.poses.front(), TruePose(20)), 1e-3);
   EXPECT_LT(Distance(after.poses.back(), TruePose(kSteps - 1)), 1e-3);
   EXPECT_GE(after.poses.back().num_nodes, kSteps);
-  ASSERT_FALSE(calm.trajectories.empty());
-  ASSERT_FALSE(after.trajectories.empty());
-  const auto& a = calm.trajectories.back();
-  const auto& b = after.trajectories.back();
-  ASSERT_EQ(a.num_poses, b.num_poses);
-  for (int i = 0; i < a.num_poses; ++i) {
-    EXPECT_EQ(a.utimes[i], b.utimes[i]);
-    EXPECT_NEAR(a.x[i], b.x[i], 1e-4) << i;
-    EXPECT_NEAR(a.y[i], b.y[i], 1e-4) << i;
-    EXPECT_NEAR(a.theta[i], b.theta[i], 1e-4) << i;
-  }
+  ExpectSameFinalTrajectory(calm, after);
 
   // Without a journal the respawned fusion starts a new graph at the RBPF's pose.
   const FusionRun fresh = RunFusion("", 20, kSteps, true);
@@ -235,16 +240,7 @@ TEST(FusionNodeJournal, SnapshotsBoundTheJournalAndARespawnGoesOnFromOne) {
   ASSERT_EQ(after.poses.size(), static_cast<size_t>(kSteps - 20));
   EXPECT_LT(Distance(after.poses.front(), TruePose(20)), 1e-3);
   EXPECT_GE(after.poses.back().num_nodes, kSteps);
-  ASSERT_FALSE(after.trajectories.empty());
-  const auto& a = calm.trajectories.back();
-  const auto& b = after.trajectories.back();
-  ASSERT_EQ(a.num_poses, b.num_poses);
-  for (int i = 0; i < a.num_poses; ++i) {
-    EXPECT_EQ(a.utimes[i], b.utimes[i]);
-    EXPECT_NEAR(a.x[i], b.x[i], 1e-4) << i;
-    EXPECT_NEAR(a.y[i], b.y[i], 1e-4) << i;
-    EXPECT_NEAR(a.theta[i], b.theta[i], 1e-4) << i;
-  }
+  ExpectSameFinalTrajectory(calm, after);
 }
 
 TEST(FusionNodeJournal, ASnapshotOfAnotherConfigOrDamagedStartsANewGraph) {

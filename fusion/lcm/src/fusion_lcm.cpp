@@ -281,8 +281,8 @@ constexpr char kNodeStateMagic[] = "FLFUSNOD";
 constexpr uint32_t kNodeStateVersion = 1;
 }  // namespace
 
-std::vector<uint8_t> FusionNode::SaveState() const {
-  StateWriter w;
+std::vector<uint8_t> FusionNode::SaveState(std::vector<uint8_t> buffer) const {
+  StateWriter w(std::move(buffer));
   w.Begin(kNodeStateMagic, kNodeStateVersion);
   w.Put(ConfigText());
   w.Put(last_utime_);
@@ -332,7 +332,12 @@ void FusionNode::SnapshotJournal() {
   const std::string& path = node_options_.journal;
   const std::string fresh = path + ".new";
   try {
-    const std::vector<uint8_t> bytes = SaveState();
+    // Room for growth first, so that the buffer is seldom reallocated as the state grows.
+    if (snapshot_buffer_.capacity() < snapshot_buffer_.size() + snapshot_buffer_.size() / 4) {
+      snapshot_buffer_.reserve(snapshot_buffer_.size() + snapshot_buffer_.size() / 2);
+    }
+    snapshot_buffer_ = SaveState(std::move(snapshot_buffer_));
+    const std::vector<uint8_t>& bytes = snapshot_buffer_;
     auto writer = std::make_unique<LcmLogWriter>(fresh, /*atomic=*/false);
     writer->Write(kJournalSnapshotChannel, bytes.data(), static_cast<int>(bytes.size()),
                   lcm_->Now());

@@ -14,6 +14,7 @@
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "fusionloc/common/geometry.hpp"
@@ -28,6 +29,11 @@ class StateError : public std::runtime_error {
 
 class StateWriter {
  public:
+  StateWriter() = default;
+  // Writes into `buffer`, cleared but with its capacity kept: a process that saves its state
+  // often reuses one buffer instead of allocating megabytes each time (which glibc's heap
+  // does not give back: the fusion's RSS grew 4 MB per 10 minutes that way).
+  explicit StateWriter(std::vector<uint8_t> buffer) : bytes_(std::move(buffer)) { bytes_.clear(); }
   // Magic (e.g. "FLFUSNAP"), then the version and a byte-order mark.
   void Begin(const std::string& magic, uint32_t version);
 

@@ -108,8 +108,9 @@ class FusionNode : public LcmNode {
   void RestoreFromJournal();
   void Record(const std::string& channel, const void* data, int size);
   // The node's state (its config, its own fields, the graph and the map) as snapshot bytes,
-  // and back (throws StateError, or std::runtime_error for another config).
-  std::vector<uint8_t> SaveState() const;
+  // written into `buffer` (its capacity reused), and back (throws StateError, or
+  // std::runtime_error for another config).
+  std::vector<uint8_t> SaveState(std::vector<uint8_t> buffer) const;
   void LoadState(const std::vector<uint8_t>& bytes);
   // Rewrites the journal as a snapshot (SaveState) followed by the inputs from now on; on a
   // failure (a full disk) the journal goes on as it was, with an error logged.
@@ -151,6 +152,7 @@ class FusionNode : public LcmNode {
   Utime last_snapshot_utime_ = 0;  // data time of the last journal snapshot (or its start)
   bool snapshot_due_ = false;      // taken at the next Poll() without a full solve running
   RateLimitedWarning snapshot_warning_;  // a snapshot could not be written
+  std::vector<uint8_t> snapshot_buffer_;  // reused by every snapshot (see StateWriter)
   std::vector<uint8_t> encode_buffer_;
 };
 
