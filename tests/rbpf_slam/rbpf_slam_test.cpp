@@ -625,7 +625,6 @@ TEST(RbpfSlam, FullPlacesGetNoMoreKeyframesWhenReuseFails) {
     o.graph.reuse_max_correction_m = 1e-4;
     o.graph.reuse_max_correction_rad = 1e-4;
     o.graph.max_keyframes_per_place = max_per_place;
-    o.graph.merge_distance = 0.0;  // the bound alone (merging: the next test)
     RbpfSlam slam(o);
     Outcome out;
     Drive(&slam, run, [&](size_t k, const ScanResult& r) {
@@ -668,72 +667,6 @@ TEST(RbpfSlam, FullPlacesGetNoMoreKeyframesWhenReuseFails) {
   EXPECT_LT(bounded.max_err, 0.25);
   EXPECT_LT(bounded.max_err, unbounded.max_err + 0.05)
       << "bounded " << bounded.max_err << " m, unbounded " << unbounded.max_err << " m";
-}
-
-// Laps of a mapped loop with neither reuse nor the density bound (each pass adds its own
-// keyframes): after each loop closure's optimisation the keyframes the graph puts on those of
-// the first lap are merged into them (graph.merge_*), so the graph holds about one lap of
-// keyframes however many laps are driven; every scan keeps its final pose, as accurate.
-TEST(RbpfSlam, KeyframesOfAPlaceAreMergedOnceTheLoopCloses) {
-  const int laps = 4;
-  const test::LoopRun run = RoomLoopRun(laps);
-  const size_t per_lap = run.utimes.size() / laps;
-  struct Outcome {
-    std::vector<int> keyframes_after_lap;  // in the graph
-    RbpfSlamStats stats;
-    double max_err = 0.0;
-    int graph_nodes = 0;
-  };
-  auto drive = [&](double merge_distance) {
-    RbpfSlamOptions o = TestOptions(10);
-    o.graph.reuse_distance = 0.0;
-    o.graph.max_keyframes_per_place = 0;
-    o.graph.merge_distance = merge_distance;
-    RbpfSlam slam(o);
-    Outcome out;
-    Drive(&slam, run, [&](size_t k, const ScanResult& r) {
-      for (const KeyframeFactor& f : r.factors) {
-        EXPECT_LT(f.utime_i, f.utime_j);
-        EXPECT_GE(f.keyframe_i, 0);
-        EXPECT_FALSE(slam.graph().merged(f.keyframe_i) && f.keyframe_j < 0);
-      }
-      if ((k + 1) % per_lap == 0) out.keyframes_after_lap.push_back(slam.num_keyframes());
-    });
-    slam.Finish();
-    out.stats = slam.stats();
-    out.graph_nodes = slam.graph().num_nodes();
-    const auto traj = slam.Trajectory();
-    EXPECT_EQ(traj.size(), run.utimes.size()) << "every scan keeps a final pose";
-    for (size_t k = 0; k < traj.size(); ++k) {
-      out.max_err = std::max(
-          out.max_err, (traj[k].T_world_base.translation() - run.truth[k].translation()).norm());
-    }
-    EXPECT_EQ(static_cast<int>(slam.KeyframePoses().size()), slam.num_keyframes());
-    for (const PoseGraphEdge& e : slam.graph().edges()) {
-      EXPECT_FALSE(slam.graph().merged(e.i) || slam.graph().merged(e.j));
-    }
-    return out;
-  };
-  const Outcome kept = drive(0.0);
-  const Outcome merged = drive(RbpfSlamOptions().graph.merge_distance);
-  ASSERT_EQ(merged.keyframes_after_lap.size(), static_cast<size_t>(laps));
-  const auto& m = merged.keyframes_after_lap;
-  const std::string per_lap_text = std::to_string(m[0]) + " " + std::to_string(m[1]) + " " +
-                                   std::to_string(m[2]) + " " + std::to_string(m[3]);
-  const int first_lap = kept.keyframes_after_lap[0];
-  // Without merging every lap adds a lap of keyframes.
-  EXPECT_EQ(kept.stats.keyframes_merged, 0);
-  EXPECT_GT(kept.keyframes_after_lap.back(), (laps - 1) * first_lap);
-  // With it the graph stays near one lap: most keyframes of laps 2-4 went into lap 1's.
-  EXPECT_GT(merged.stats.keyframes_merged, (laps - 1) * first_lap / 2) << per_lap_text;
-  EXPECT_LT(m.back(), 2 * first_lap) << per_lap_text;
-  EXPECT_LE(m[3] - m[2], first_lap / 4) << per_lap_text;
-  EXPECT_EQ(merged.graph_nodes, merged.stats.keyframes);
-  EXPECT_EQ(m.back() + merged.stats.keyframes_merged, merged.stats.keyframes);
-  // As accurate.
-  EXPECT_LT(merged.max_err, 0.25);
-  EXPECT_LT(merged.max_err, kept.max_err + 0.05)
-      << "merged " << merged.max_err << " m, kept " << kept.max_err << " m";
 }
 
 TEST(RbpfSlam, FilterEdgeHoldsEachKeyframeWhereTheFilterPutIt) {

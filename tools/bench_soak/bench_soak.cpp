@@ -7,8 +7,7 @@
 // figures for its process group), the latency from a LASER message's arrival to the arrival
 // of the FUSED_POSE of the same stamp (p99 of that minute), and the sizes the processes
 // report in their STATUS: the fusion's graph nodes and factors and map keyframes, the
-// RBPF-SLAM's keyframes (in its graph, and merged so far), the journal's size on disk. After
-// the warm-up, the slope of each
+// RBPF-SLAM's keyframes, the journal's size on disk. After the warm-up, the slope of each
 // (least squares) per 10 minutes: rss_slope_mb_per_10min per process (flat: |slope| < 1 MB per
 // 10 min) and size_slope_per_10min per size (bounded: the graph stops growing once the route
 // has been mapped). Messages lost: what the simulator's schedule published minus what arrived
@@ -187,7 +186,6 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
       {"map_keyframes", fl::StatusChannel("fl-fusion"), "map_keyframes"},
       {"map_points", fl::StatusChannel("fl-fusion"), "map_points"},
       {"rbpf_keyframes", fl::StatusChannel("fl-rbpf-slam"), "keyframes"},
-      {"rbpf_keyframes_merged", fl::StatusChannel("fl-rbpf-slam"), "keyframes_merged"},
       {"journal_snapshot_mb", fl::StatusChannel("fl-fusion"), "journal_snapshot_mb"},
       {"journal_snapshot_ms", fl::StatusChannel("fl-fusion"), "journal_snapshot_ms"},
       {"journal_mb", "", ""}};

@@ -168,8 +168,6 @@ Status GraphOptions::Validate() const {
   FL_RETURN_IF_ERROR(Positive("graph.reuse_max_correction_m", reuse_max_correction_m));
   FL_RETURN_IF_ERROR(Positive("graph.reuse_max_correction_rad", reuse_max_correction_rad));
   FL_RETURN_IF_ERROR(NonNegative("graph.max_keyframes_per_place", max_keyframes_per_place));
-  FL_RETURN_IF_ERROR(NonNegative("graph.merge_distance", merge_distance));
-  FL_RETURN_IF_ERROR(NonNegative("graph.merge_angle", merge_angle));
   if (loop_max_candidates < 1) return Status::Error("graph.loop_max_candidates must be >= 1");
   if (loop_closure_spacing < 1) {
     return Status::Error(

@@ -10,63 +10,15 @@ namespace fl::rbpf {
 
 int PoseGraph2D::AddNode(const fl::Pose2& T) {
   nodes_.push_back({T.x, T.y, T.theta});
-  merged_.push_back(false);
   return static_cast<int>(nodes_.size()) - 1;
 }
 
 void PoseGraph2D::AddEdge(const PoseGraphEdge& e) {
-  if (e.i < 0 || e.j < 0 || e.i >= num_nodes() || e.j >= num_nodes() || e.i == e.j ||
-      merged(e.i) || merged(e.j)) {
+  if (e.i < 0 || e.j < 0 || e.i >= num_nodes() || e.j >= num_nodes() || e.i == e.j) {
     throw std::invalid_argument("PoseGraph2D::AddEdge: bad node ids " + std::to_string(e.i) +
                                 ", " + std::to_string(e.j));
   }
   edges_.push_back(e);
-}
-
-int PoseGraph2D::MergeNode(int j, int i, const fl::Pose2& T_i_j) {
-  if (j <= 0 || i < 0 || j >= num_nodes() || i >= num_nodes() || i == j || merged(i) ||
-      merged(j)) {
-    throw std::invalid_argument("PoseGraph2D::MergeNode: bad node ids " + std::to_string(j) +
-                                " into " + std::to_string(i));
-  }
-  // The residual (se2_between_cost.hpp) is e = [t(T_est) − t(T_meas) in the first node's
-  // frame; θ_est − θ_meas]. With J = I · T_i_j:
-  // - an edge j → y, measured T_j_y, becomes i → y measured T_i_j · T_j_y: its estimate is
-  //   T_i_j · T_est, so e' = B e with B = diag(R(θ_i_j), 1) (exact) and Ω' = B Ω Bᵀ;
-  // - an edge x → j, measured T_x_j, becomes x → i measured T_x_j · T_j_i: its estimate is
-  //   T_est · T_j_i, so t' differs by (R(θ_est) − R(θ_meas)) t_j_i ≈ δθ R(θ_meas) J t_j_i
-  //   (J the 90° rotation): e' ≈ A e with A = [I c; 0 1], c = R(θ_meas) J t_j_i, and
-  //   Ω' = A⁻ᵀ Ω A⁻¹.
-  const fl::Pose2 T_j_i = T_i_j.inverse();
-  int moved = 0;
-  std::vector<PoseGraphEdge> kept;
-  kept.reserve(edges_.size());
-  for (PoseGraphEdge e : edges_) {
-    const bool from_j = e.i == j, to_j = e.j == j;
-    if ((from_j && e.j == i) || (to_j && e.i == i)) continue;  // between i and j: dropped
-    if (from_j) {
-      Eigen::Matrix3d B = Eigen::Matrix3d::Identity();
-      B.topLeftCorner<2, 2>() = T_i_j.rotation();
-      e.information = B * e.information * B.transpose();
-      e.T_i_j = T_i_j * e.T_i_j;
-      e.i = i;
-      ++moved;
-    } else if (to_j) {
-      const Eigen::Vector2d t_j_i = T_j_i.translation();
-      Eigen::Matrix3d A_inv = Eigen::Matrix3d::Identity();
-      A_inv.topRightCorner<2, 1>() = -(e.T_i_j.rotation() * Eigen::Vector2d(-t_j_i.y(), t_j_i.x()));
-      e.information = A_inv.transpose() * e.information * A_inv;
-      e.T_i_j = e.T_i_j * T_j_i;
-      e.j = i;
-      ++moved;
-    }
-    kept.push_back(e);
-  }
-  edges_ = std::move(kept);
-  merged_[static_cast<size_t>(j)] = true;
-  ++num_merged_;
-  problem_.reset();  // rebuilt without node j at the next Optimize / Cost
-  return moved;
 }
 
 void PoseGraph2D::SyncProblem() {

@@ -618,21 +618,15 @@ fl::Pose2 RbpfSlam::OdometryFromAnchor(const Anchor& from, int j) const {
 
 RbpfSlam::Revisit RbpfSlam::EarlierKeyframesNear(const fl::Pose2& pose) const {
   const GraphOptions& g = opt_.graph;
-  if (!g.enabled || g.reuse_distance <= 0.0) return Revisit();
-  return KeyframesNear(pose, path_length_, graph_.num_nodes(), g.reuse_distance, g.reuse_angle);
-}
-
-RbpfSlam::Revisit RbpfSlam::KeyframesNear(const fl::Pose2& pose, double path_length, int before,
-                                          double distance, double angle) const {
   Revisit r;
-  double best_d = distance;
-  for (int c = 0; c < before; ++c) {
-    if (graph_.merged(c)) continue;
+  if (!g.enabled || g.reuse_distance <= 0.0) return r;
+  double best_d = g.reuse_distance;
+  for (int c = 0; c < graph_.num_nodes(); ++c) {
     // A revisit: at least loop_min_travel of path back, as for a loop closure.
-    if (path_length - keyframes_[c].path_length < opt_.graph.loop_min_travel) continue;
+    if (path_length_ - keyframes_[c].path_length < g.loop_min_travel) continue;
     const fl::Pose2 d = graph_.pose(c).between(pose);
     const double dist = std::hypot(d.x, d.y);
-    if (dist >= distance || std::abs(d.theta) >= angle) continue;
+    if (dist >= g.reuse_distance || std::abs(d.theta) >= g.reuse_angle) continue;
     ++r.count;
     if (dist < best_d) {
       best_d = dist;
@@ -779,7 +773,6 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
   // submaps of those already chosen (so two candidates are two different views of the place).
   std::vector<std::pair<double, int>> near;
   for (int c = 0; c < j; ++c) {
-    if (graph_.merged(c)) continue;
     if (keyframes_[j].path_length - keyframes_[c].path_length < g.loop_min_travel) continue;
     const fl::Pose2 pc = graph_.pose(c);
     const double d = std::hypot(pc.x - pj.x, pc.y - pj.y);
@@ -830,66 +823,6 @@ void RbpfSlam::SearchLoopClosure(int j, ScanResult* res) {
     last_closure_keyframe_ = j;
     res->factors.push_back(Factor(e.i, e.j, icp, true));
   }
-  // After the factors (merging renumbers the graph's edges).
-  MergeRevisitedKeyframes();
-}
-
-void RbpfSlam::MergeRevisitedKeyframes() {
-  const GraphOptions& g = opt_.graph;
-  const int n = graph_.num_nodes();
-  if (!(g.merge_distance > 0.0) || !(g.merge_angle > 0.0)) {
-    merge_checked_ = n;
-    return;
-  }
-  IcpOptions io = opt_.icp;
-  io.min_inlier_fraction = g.loop_min_inlier_fraction;
-  io.max_rms = g.loop_max_rms;
-  for (int j = std::max(1, merge_checked_); j < n; ++j) {
-    if (graph_.merged(j)) continue;
-    // The nearest older keyframe of an earlier pass within the merge distance.
-    const fl::Pose2 pj = graph_.pose(j);
-    const int nearest =
-        KeyframesNear(pj, keyframes_[j].path_length, j, g.merge_distance, g.merge_angle).nearest;
-    if (nearest < 0) continue;
-    // The older pass must see this keyframe's scan where the graph puts it.
-    const fl::Pose2 prior = graph_.pose(nearest).between(pj);
-    const IcpResult icp = AlignPointToLine(LoopSubmap(nearest, keyframes_[j].path_length),
-                                           keyframes_[j].points_base, prior, io);
-    if (!icp.ok || !Within(prior.between(icp.T_ref_query), g.reuse_max_correction_m,
-                           g.reuse_max_correction_rad)) {
-      ++stats_.merge_rejections;
-      continue;
-    }
-    MergeKeyframe(j, nearest);
-  }
-  merge_checked_ = n;
-}
-
-void RbpfSlam::MergeKeyframe(int j, int i) {
-  const fl::Pose2 T_i_j = graph_.pose(i).between(graph_.pose(j));
-  graph_.MergeNode(j, i, T_i_j);
-  Keyframe& kf = keyframes_[static_cast<size_t>(j)];
-  std::vector<Eigen::Vector2d>().swap(kf.points_base);
-  std::vector<PointNormal>().swap(kf.normals_base);
-  for (PathRecord& r : path_) {
-    if (r.keyframe != j) continue;
-    r.keyframe = i;
-    r.T_kf_base = T_i_j * r.T_kf_base;
-  }
-  for (RecentScan& r : recent_) {
-    if (r.keyframe != j) continue;
-    r.keyframe = i;
-    r.T_kf_base = T_i_j * r.T_kf_base;
-  }
-  if (anchor_.keyframe == j) {
-    // The filter goes on from the older keyframe, as after a reuse.
-    anchor_.keyframe = i;
-    anchor_.T_kf_anchor = T_i_j * anchor_.T_kf_anchor;
-    anchor_.reused = true;
-  }
-  // The next map rebuild starts over, without j's scan.
-  rebuild_poses_.clear();
-  ++stats_.keyframes_merged;
 }
 
 std::vector<PointNormal> RbpfSlam::LoopSubmap(int cand, double path_length) const {
@@ -899,7 +832,7 @@ std::vector<PointNormal> RbpfSlam::LoopSubmap(int cand, double path_length) cons
   const int n = static_cast<int>(keyframes_.size());
   for (int k = std::max(0, cand - g.loop_submap_half_width);
        k <= std::min(n - 1, cand + g.loop_submap_half_width); ++k) {
-    if (graph_.merged(k) || path_length - keyframes_[k].path_length < g.loop_min_travel) continue;
+    if (path_length - keyframes_[k].path_length < g.loop_min_travel) continue;
     const fl::Pose2 T_c_k = pc.between(graph_.pose(k));
     const Eigen::Matrix2d R = T_c_k.rotation();
     for (const PointNormal& pn : keyframes_[k].normals_base) {
@@ -1006,7 +939,6 @@ void RbpfSlam::RebuildMaps() {
   TiledGrid map = reuse ? rebuild_map_ : TiledGrid(opt_.grid);
   map.BeginBatch();
   for (int k = reuse ? cached : 0; k < n; ++k) {
-    if (graph_.merged(k)) continue;
     IntegrateInto(&map, graph_.pose(k), keyframes_[k].points_base);
   }
   map.EndBatch();
@@ -1066,9 +998,7 @@ std::vector<StampedPose2> RbpfSlam::Trajectory() const {
 
 std::vector<StampedPose2> RbpfSlam::KeyframePoses() const {
   std::vector<StampedPose2> out;
-  for (int k = 0; k < graph_.num_nodes(); ++k) {
-    if (!graph_.merged(k)) out.push_back({keyframes_[k].utime, graph_.pose(k)});
-  }
+  for (int k = 0; k < graph_.num_nodes(); ++k) out.push_back({keyframes_[k].utime, graph_.pose(k)});
   return out;
 }
 

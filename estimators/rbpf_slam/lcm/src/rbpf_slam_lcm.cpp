@@ -405,8 +405,7 @@ void RbpfSlamNode::RunScan(const LaserScan& scan, const Pose2* odom_in, const St
   const auto& s = slam_.stats();
   status_.Set("particles", slam_.num_particles());
   status_.Set("neff", r.neff);
-  status_.Set("keyframes", slam_.num_keyframes());  // in the graph now
-  status_.Set("keyframes_merged", static_cast<double>(s.keyframes_merged));
+  status_.Set("keyframes", static_cast<double>(s.keyframes));
   status_.Set("loop_closures", static_cast<double>(s.loop_closures));
   status_.Set("keyframe_reuses", static_cast<double>(s.keyframe_reuses));
   status_.Set("keyframes_bounded", static_cast<double>(s.keyframes_bounded));
@@ -446,9 +445,7 @@ void RbpfSlamNode::Finish() {
 std::string RbpfSlamNode::Summary() const {
   const auto& s = slam_.stats();
   return "scans " + std::to_string(s.scans) + ", processed " + std::to_string(s.processed) +
-         ", keyframes " + std::to_string(slam_.num_keyframes()) + " (added " +
-         std::to_string(s.keyframes) + ", merged into older ones " +
-         std::to_string(s.keyframes_merged) + ", reused on revisits " +
+         ", keyframes " + std::to_string(s.keyframes) + " (reused on revisits " +
          std::to_string(s.keyframe_reuses) + ", in full places unverified " +
          std::to_string(s.keyframes_bounded) + ")" + ", loop closures " +
          std::to_string(s.loop_closures) + " (of " + std::to_string(s.loop_candidates) +

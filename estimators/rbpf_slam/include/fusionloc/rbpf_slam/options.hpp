@@ -384,22 +384,6 @@ struct GraphOptions {
   // (the 30-minute soak, RELIABILITY.md; 3 hours of simulation, RBPF_SLAM.md item 7: fewer
   // keyframes and a lower error than 4 on every seed). 0 = no bound.
   int max_keyframes_per_place = 3;
-  // Merging after the fact: reuse and the bound above act when a keyframe is due, with the
-  // graph as it is then; the first keyframes of a return, added before its loop closed, and
-  // those added where reuse failed, stay even once the closure's optimisation puts them on
-  // the keyframes of the earlier pass. After each optimisation, every keyframe added since the
-  // previous one (except the newest, where the filter is) that the graph now puts within
-  // merge_distance and merge_angle of an older active keyframe at least loop_min_travel back
-  // along the path is matched by ICP against that keyframe's submap (the loop closures'
-  // thresholds, from the graph's relative pose); if that verifies within
-  // reuse_max_correction_m / _rad, it is merged into the older one: it leaves the graph, its
-  // edges move onto the older node (PoseGraph2D::MergeNode), its scan is freed, and the scans
-  // stored against it are stored against the older one at the graph's relative pose. The
-  // keyframes then come back to about one pass of the mapped area however often it is
-  // driven (the 30-minute soak and 3 hours of simulation: RELIABILITY.md). 0 = off.
-  // Half the keyframe spacing: the older keyframe sees what the merged one saw.
-  double merge_distance = 0.25;  // [m]
-  double merge_angle = 0.2;      // [rad]
 
   template <class A>
   void Serialize(A* a) {
@@ -442,8 +426,6 @@ struct GraphOptions {
     a->Visit("reuse_max_correction_m", &reuse_max_correction_m);
     a->Visit("reuse_max_correction_rad", &reuse_max_correction_rad);
     a->Visit("max_keyframes_per_place", &max_keyframes_per_place);
-    a->Visit("merge_distance", &merge_distance);
-    a->Visit("merge_angle", &merge_angle);
   }
   Status Validate() const;
 };

@@ -30,14 +30,10 @@ struct PoseGraphEdge {
 class PoseGraph2D {
  public:
   PoseGraph2D() = default;
-  PoseGraph2D(const PoseGraph2D& other)
-      : nodes_(other.nodes_), merged_(other.merged_), num_merged_(other.num_merged_),
-        edges_(other.edges_) {}
+  PoseGraph2D(const PoseGraph2D& other) : nodes_(other.nodes_), edges_(other.edges_) {}
   PoseGraph2D& operator=(const PoseGraph2D& other) {
     if (this != &other) {
       nodes_ = other.nodes_;
-      merged_ = other.merged_;
-      num_merged_ = other.num_merged_;
       edges_ = other.edges_;
       problem_.reset();
       edges_in_problem_ = 0;
@@ -47,16 +43,6 @@ class PoseGraph2D {
 
   int AddNode(const fl::Pose2& T_world_node);
   void AddEdge(const PoseGraphEdge& edge);
-  // Node reduction: node j (not node 0) becomes rigidly attached to node i at the relative pose
-  // T_i_j, and leaves the problem. Every edge on j is moved onto i with its measurement carried
-  // by T_i_j and its information transformed so that, with j at pose(i) * T_i_j, each residual
-  // is the one it had (exactly for an edge leaving j, to first order in the angle error for one
-  // arriving at j); edges between i and j are dropped. j's pose is left as it was; it follows
-  // no later optimisation. Returns the number of edges moved; throws std::invalid_argument for
-  // bad or merged ids.
-  int MergeNode(int j, int i, const fl::Pose2& T_i_j);
-  bool merged(int k) const { return merged_[static_cast<size_t>(k)]; }
-  int num_active_nodes() const { return num_nodes() - num_merged_; }
   // Levenberg-Marquardt with sparse Cholesky; node 0 is held fixed. Returns the final cost
   // (½ Σ squared whitened residuals); `converged` tells whether Ceres reported convergence.
   // It also stops when a step lowers the cost by less than `function_tolerance` of it.
@@ -87,8 +73,6 @@ class PoseGraph2D {
 
   // A deque: the problem points into the nodes, and push_back keeps them where they are.
   std::deque<std::array<double, 3>> nodes_;
-  std::vector<bool> merged_;  // per node: merged into another (MergeNode)
-  int num_merged_ = 0;
   std::vector<PoseGraphEdge> edges_;
   std::unique_ptr<ceres::Problem> problem_;
   int edges_in_problem_ = 0;  // edges_[0, edges_in_problem_) have been added (if enabled)

@@ -81,11 +81,7 @@ struct RbpfSlamStats {
   int64_t match_failures = 0;           // particle updates that fell back to odometry
   int64_t matcher_evaluations = 0;      // scan-matcher cost evaluations (passes over the points)
   int64_t degenerate_matches = 0;       // particle updates with a degenerate direction (corridor)
-  int64_t keyframes = 0;                // keyframes added (RbpfSlam::num_keyframes(): in the
-                                        //     graph now)
-  int64_t keyframes_merged = 0;         // keyframes merged into an older one of the same place
-                                        //     after an optimisation (graph.merge_*)
-  int64_t merge_rejections = 0;         // ... candidates whose ICP did not verify
+  int64_t keyframes = 0;
   int64_t icp_failures = 0;             // sequential keyframe ICP that failed verification
   int64_t noisy_factors = 0;            // ... of which published anyway: only the RMS gate, at
                                         //     the scan's noise (graph.noisy_factor_rms_per_noise)
@@ -153,7 +149,6 @@ class RbpfSlam {
   // one's correction of the odometry spread over the scans before it).
   // Without the scan path (SetKeepScanPath(false)): KeyframePoses().
   std::vector<StampedPose2> Trajectory() const;
-  // The keyframes in the graph (merged ones left out), in the order they were added.
   std::vector<StampedPose2> KeyframePoses() const;
   // Whether every scan's record is kept for Trajectory() (default: yes). It costs 64 bytes per
   // accepted scan (2.3 MB per hour of a 10 Hz laser), unbounded on a robot that runs for hours,
@@ -161,10 +156,7 @@ class RbpfSlam {
   void SetKeepScanPath(bool keep);
   bool keeps_scan_path() const { return keep_scan_path_; }
   // The keyframe pose graph (nodes = keyframes; ICP, filter, weak and loop-closure edges).
-  // Merged keyframes (graph.merge_*) stay as nodes outside the problem (graph().merged(k)).
   const PoseGraph2D& graph() const { return graph_; }
-  // Keyframes in the graph now: added, less merged.
-  int num_keyframes() const { return graph_.num_active_nodes(); }
   // Map of the best particle.
   const TiledGrid& BestMap() const;
   std::vector<double> NormalizedWeights() const;
@@ -260,10 +252,6 @@ class RbpfSlam {
     int count = 0;
   };
   Revisit EarlierKeyframesNear(const fl::Pose2& pose) const;
-  // The keyframes among [0, before) not merged, at least loop_min_travel of path before
-  // `path_length`, within `distance` and `angle` of `pose`: the nearest and how many.
-  Revisit KeyframesNear(const fl::Pose2& pose, double path_length, int before, double distance,
-                        double angle) const;
   // Anchors the filter to keyframe c for this scan at `pose` if ICP of the scan against c
   // verifies within the reuse correction; the factor from c to the scan goes in result.
   bool ReuseKeyframe(int c, fl::Utime utime, const fl::Pose2& pose, ScanResult* result);
@@ -304,12 +292,6 @@ class RbpfSlam {
   // The published factor of an ICP result between keyframes i and j (calibrated information).
   KeyframeFactor Factor(int i, int j, const IcpResult& icp, bool is_loop_closure) const;
   bool OptimizeAndFeedBack(ScanResult* result);
-  // After an optimisation: the keyframes added since the last call that the graph now puts on
-  // an older keyframe of the same place are merged into it if ICP verifies (graph.merge_*).
-  void MergeRevisitedKeyframes();
-  // Keyframe j into the older keyframe i at their graph relative pose: the graph node, the
-  // scans stored against j (path, recent scans, the anchor); j's scan is freed.
-  void MergeKeyframe(int j, int i);
   void RebuildMaps();
   int BestIndex() const;
 
@@ -346,7 +328,6 @@ class RbpfSlam {
   int graph_loop_edges_ = 0;
   int last_closure_keyframe_ = -1;  // newest keyframe with an accepted loop closure (-1: none)
   int optimized_loop_edges_ = 0;
-  int merge_checked_ = 0;  // keyframes [0, merge_checked_) were candidates of a merge already
   bool keep_scan_path_ = true;
   std::vector<PathRecord> path_;  // every accepted scan (if keep_scan_path_)
   std::deque<RecentScan> recent_;  // accepted scans of the last late_scan_max_age_s, in order
