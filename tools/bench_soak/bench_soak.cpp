@@ -15,7 +15,8 @@
 // error overall and per minute (OUT/fused_ate_per_minute.csv). Every sample also goes to
 // OUT/samples.csv. At the end, the journal the run left is restored the way a respawned
 // fl-fusion restores it (FusionNode, in this process, on a copy), timed: what a kill -9 at the
-// end of the run would cost (run "journal_restore").
+// end of the run would cost (run "journal_restore"); and so is the largest journal of the
+// per-minute samples, a respawn's worst case (run "journal_restore_largest").
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -73,10 +74,11 @@ double At(const std::vector<double>& t, const std::vector<double>& y, double t_f
 }
 
 // The journal restored as a respawned fl-fusion restores it (FusionNode's constructor, here
-// on memq:// and a copy of the file), timed.
-fl::bench::Run RestoreJournal(const Setup& s, const std::string& journal) {
+// on memq:// and a copy of the file), timed; the run is called `name`.
+fl::bench::Run RestoreJournal(const Setup& s, const std::string& journal, const std::string& name,
+                              const std::string& what) {
   fl::bench::Run run;
-  run.name = "journal_restore";
+  run.name = name;
   run.input = journal;
   std::error_code ec;
   const auto bytes = std::filesystem::file_size(journal, ec);
@@ -104,8 +106,8 @@ fl::bench::Run RestoreJournal(const Setup& s, const std::string& journal) {
       .Add("restored_inputs", static_cast<double>(node.restored_inputs()))
       .Add("restored_nodes", node.fusion().num_nodes())
       .Add("restored_retired_nodes", static_cast<double>(node.fusion().num_retired_nodes()));
-  run.note = "replayed in-process as a respawned fl-fusion does: snapshot (if any), inputs "
-             "after it, one full solve";
+  run.note = what + ", replayed in-process as a respawned fl-fusion does: snapshot (if any), "
+             "inputs after it, one full solve";
   return run;
 }
 
@@ -197,6 +199,8 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
   for (const auto& p : procs) csv << ",rss_mb_" << p;
   for (const auto& z : sizes) csv << "," << z.name;
   csv << ",latency_ms_p99\n";
+  std::uintmax_t largest_journal_bytes = 0;  // of fusion.journal.largest
+  std::filesystem::remove(dir + "/fusion.journal.largest");
   size_t latency_from = 0;  // laser_at is ordered by stamp = arrival order of the simulator
   std::vector<double> all_latency_ms;
 
@@ -221,6 +225,14 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
         std::error_code ec;
         const auto bytes = std::filesystem::file_size(dir + "/fusion.journal", ec);
         if (!ec) v = static_cast<double>(bytes) / 1048576.0;
+        // The largest journal seen (the most inputs after a snapshot) is kept for a restore at
+        // the end: a respawn's worst case. Copied while fl-fusion appends to it: its last event
+        // may be cut, as after a kill -9 (the restore reads what is whole).
+        if (!ec && bytes > largest_journal_bytes) {
+          std::filesystem::copy_file(dir + "/fusion.journal", dir + "/fusion.journal.largest",
+                                     std::filesystem::copy_options::overwrite_existing, ec);
+          if (!ec) largest_journal_bytes = bytes;
+        }
       } else if (status.count(z.channel) && status[z.channel].count(z.key)) {
         v = status[z.channel][z.key];
       }
@@ -262,7 +274,11 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
   pipeline.StopAll();
   pipeline.Poll();
   if (fl::ShutdownRequested()) return fl::kExitFailure;
-  report->AddRun(RestoreJournal(s, dir + "/fusion.journal"));
+  report->AddRun(
+      RestoreJournal(s, dir + "/fusion.journal", "journal_restore", "the journal at the end"));
+  report->AddRun(RestoreJournal(s, dir + "/fusion.journal.largest", "journal_restore_largest",
+                                "the largest journal of the per-minute samples (the most "
+                                "inputs after a snapshot: a respawn's worst case)"));
 
   const double warm_min = warmup_s / 60.0;
   for (const auto& p : procs) {
