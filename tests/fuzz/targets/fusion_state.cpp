@@ -122,7 +122,14 @@ int Fuzz_fusion_state(const uint8_t* data, size_t size) {
     }
   }
   fusion.FullSolve();
-  for (const auto& p : fusion.Trajectory()) (void)p;
+  // Trajectory(): one pose per scan, in time order.
+  Utime previous = 0;
+  bool first = true;
+  for (const auto& p : fusion.Trajectory()) {
+    FL_FUZZ_CHECK(first || p.utime > previous);
+    previous = p.utime;
+    first = false;
+  }
   fl::fusion::TrajectoryPoint latest;
   (void)fusion.Latest(&latest);
   (void)map.MergeFinalKeyframes([&](Utime t, Pose2* p) { return fusion.PoseAt(t, p); },
