@@ -6,6 +6,7 @@
 //             factor and a 3D map), so that the search starts from bytes that load.
 // Any bytes either load or throw StateError; a fusion and a map that load take new inputs,
 // solve, and give finite poses without crashing.
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -123,13 +124,11 @@ int Fuzz_fusion_state(const uint8_t* data, size_t size) {
   }
   fusion.FullSolve();
   // Trajectory(): one pose per scan, in time order.
-  Utime previous = 0;
-  bool first = true;
-  for (const auto& p : fusion.Trajectory()) {
-    FL_FUZZ_CHECK(first || p.utime > previous);
-    previous = p.utime;
-    first = false;
-  }
+  const auto trajectory = fusion.Trajectory();
+  FL_FUZZ_CHECK(std::adjacent_find(trajectory.begin(), trajectory.end(),
+                                   [](const auto& a, const auto& b) {
+                                     return a.utime >= b.utime;
+                                   }) == trajectory.end());
   fl::fusion::TrajectoryPoint latest;
   (void)fusion.Latest(&latest);
   (void)map.MergeFinalKeyframes([&](Utime t, Pose2* p) { return fusion.PoseAt(t, p); },
