@@ -46,6 +46,10 @@ TEST(SimMainTest, BadInputGivesClearErrors) {
   EXPECT_NE(out.find("/nonexistent/sim.yaml"), std::string::npos) << out;
   EXPECT_EQ(RunCommand(kSim + " --rate -1", &out), 2);
   EXPECT_NE(out.find("--rate"), std::string::npos) << out;
+  EXPECT_EQ(RunCommand(kSim + " --camera-rate-hz -2 --log x", &out), 2);
+  EXPECT_NE(out.find("--camera-rate-hz"), std::string::npos) << out;
+  EXPECT_EQ(RunCommand(kSim + " --camera-rate-hz 3 --log x", &out), 2);  // 10 Hz steps / 3
+  EXPECT_NE(out.find("rate"), std::string::npos) << out;
 }
 
 TEST(SimMainTest, WritesALogFromAConfigFile) {
@@ -61,8 +65,20 @@ TEST(SimMainTest, WritesALogFromAConfigFile) {
   fl::LcmLogEvent ev;
   int events = 0, stereo = 0;
   while (reader.Next(&ev)) ++events, stereo += ev.channel == "STEREO";
-  // 6 steps x (truth, odometry, laser) + calibration + 2 pairs + LASER_TO_BASE, CAMERA_TO_BASE
-  EXPECT_EQ(events, 6 * 3 + 1 + 2 + 2);
+  // 6 steps x (truth, odometry, laser) + calibration + 6 pairs (10 Hz) + LASER_TO_BASE,
+  // CAMERA_TO_BASE
+  EXPECT_EQ(events, 6 * 3 + 1 + 6 + 2);
+  EXPECT_EQ(stereo, 6);
+  // The MSIF paper's 2 Hz camera: a pair every 5th step (steps 0 and 5).
+  ASSERT_EQ(RunCommand(kSim + " --config " + fl::test::SourceDir() +
+                           "/config/sim_corridor.yaml --duration 0.5 --camera-rate-hz 2 --log " +
+                           dir.file("slow.lcmlog"),
+                       &out),
+            0)
+      << out;
+  fl::LcmLogReader slow(dir.file("slow.lcmlog"));
+  stereo = 0;
+  while (slow.Next(&ev)) stereo += ev.channel == "STEREO";
   EXPECT_EQ(stereo, 2);
 }
 

@@ -21,7 +21,7 @@ TEST(SimOptionsTest, DefaultsAreThePaperScenario) {
   EXPECT_EQ(o.world.name, "paper");
   EXPECT_EQ(o.steps(), 1000);
   EXPECT_EQ(o.PeriodSteps(o.laser.rate_hz), 1);
-  EXPECT_EQ(o.PeriodSteps(o.camera.rate_hz), 5);
+  EXPECT_EQ(o.PeriodSteps(o.camera.rate_hz), 1);  // 10 Hz, as real stereo cameras
   EXPECT_EQ(o.laser.beams, 682);
   EXPECT_TRUE(DefaultOptionsForWorld("corridor").Validate().ok());
   EXPECT_THROW(DefaultOptionsForWorld("office"), std::invalid_argument);

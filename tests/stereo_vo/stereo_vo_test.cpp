@@ -355,13 +355,18 @@ TEST(StereoVoOptionsTest, ConfigFileLoadsAndDefaultsValidate) {
   EXPECT_EQ(o.local_ba.window_keyframes, StereoVoOptions().local_ba.window_keyframes);
   EXPECT_EQ(o.local_ba.motion_prior_covariance_scale,
             StereoVoOptions().local_ba.motion_prior_covariance_scale);
-  // The 10 Hz variant changes only what it says.
-  const StereoVoOptions fast =
-      fl::LoadYamlFile<StereoVoOptions>(fl::test::SourceDir() + "/config/stereo_vo_10hz.yaml");
-  EXPECT_TRUE(fast.Validate().ok());
-  EXPECT_TRUE(fast.use_odometry_prior);
-  EXPECT_EQ(fast.refine.covariance_scale, 10.0);
-  EXPECT_EQ(fast.keyframe_translation_m, o.keyframe_translation_m);
+  // The 2 Hz variant changes only what it says, and keeps the local BA's prior (the product of
+  // the two covariance scales) as it is at 10 Hz.
+  const StereoVoOptions slow =
+      fl::LoadYamlFile<StereoVoOptions>(fl::test::SourceDir() + "/config/stereo_vo_2hz.yaml");
+  EXPECT_TRUE(slow.Validate().ok());
+  EXPECT_TRUE(o.use_odometry_prior);
+  EXPECT_FALSE(slow.use_odometry_prior);
+  EXPECT_EQ(o.refine.covariance_scale, 10.0);
+  EXPECT_EQ(slow.refine.covariance_scale, 1.0);
+  EXPECT_EQ(slow.refine.covariance_scale * slow.local_ba.motion_prior_covariance_scale,
+            o.refine.covariance_scale * o.local_ba.motion_prior_covariance_scale);
+  EXPECT_EQ(slow.keyframe_translation_m, o.keyframe_translation_m);
 }
 
 TEST(StereoVoOptionsTest, DisparityOffsetOptionsAreChecked) {

@@ -252,8 +252,9 @@ int main(int argc, char** argv) {
   cli.AddFlag("png-dir", &png_dir, "where to write fusion_<world>_errors.png");
   cli.AddFlag("duration", &duration_s, "override the simulated duration [s] (0: the world's)");
   cli.AddFlag("camera-rate-hz", &camera_rate_hz,
-              "override the worlds' stereo camera rate [Hz] (0: the world's, the paper's 2 Hz); "
-              "recorded as a benchmark of its own, sim-camera-<rate>hz");
+              "override the worlds' stereo camera rate [Hz] (0: the world's, 10 Hz; the paper's "
+              "2 Hz with --vo-config config/stereo_vo_2hz.yaml); recorded as a benchmark of its "
+              "own, sim-camera-<rate>hz");
   cli.AddFlag("laser-aided-runs", &laser_aided_runs,
               "also run each world with the simulator's 16-line laser and the VO laser-aided "
               "(runs <world>_vo_only_lv and <world>_fused_lv)");

@@ -3,7 +3,9 @@
 // process), talking over loopback UDP multicast; the simulator runs in real time at its
 // rates with 640x480 stereo at each rate of --stereo-rates. Measured by a subscriber here:
 //  - latency [ms] from a LASER message's arrival to the arrival of the FUSED_POSE of the
-//    same time stamp (the first fused pose that includes the scan): p50, p99, max;
+//    same time stamp (the first fused pose that includes the scan): p50, p99, max; and the
+//    part of it until the RBPF-SLAM's RBPF_POSE of that stamp (rbpf_latency_ms_*), so that a
+//    tail can be told apart as the laser SLAM's or the fusion's;
 //  - messages lost per sensor channel: what the simulator published (its deterministic
 //    schedule, checked against the total it reports) minus what arrived here; and the scans
 //    that got no fused pose;
@@ -23,6 +25,7 @@
 #include <thread>
 
 #include "bot_core/planar_lidar_t.hpp"
+#include "bot_core/pose_t.hpp"
 #include "fusionloc/bench/bench.hpp"
 #include "fusionloc/common/lcm_interface.hpp"
 #include "fusionloc/common/number_format.hpp"
@@ -69,11 +72,14 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
       "udpm://239.255.76.67:" + std::to_string(s.port) + "?ttl=0&recv_buf_size=16777216";
   auto lcm = fl::MakeLcm(url);
   std::map<std::string, int64_t> received;
-  std::map<int64_t, double> laser_at, fused_at;
+  std::map<int64_t, double> laser_at, rbpf_at, fused_at;
   lcm->SubscribeRaw(".*",
                     [&](const std::string& ch, const void*, int, fl::Utime) { ++received[ch]; });
   lcm->Subscribe<bot_core::planar_lidar_t>(
       "LASER", [&](const auto& m, const std::string&) { laser_at.emplace(m.utime, NowSeconds()); });
+  lcm->Subscribe<bot_core::pose_t>("RBPF_POSE", [&](const auto& m, const std::string&) {
+    rbpf_at.emplace(m.utime, NowSeconds());
+  });
   lcm->Subscribe<fusionloc::fused_pose_t>("FUSED_POSE", [&](const auto& m, const std::string&) {
     fused_at.emplace(m.utime, NowSeconds());
   });
@@ -114,15 +120,20 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
   fl::bench::Run run;
   run.name = name;
   run.input = "world " + s.world + ", " + fl::FormatDouble(s.duration_s) + " s real time";
-  std::vector<double> latency_ms;
+  std::vector<double> latency_ms, rbpf_latency_ms;
   for (const auto& [utime, at] : laser_at) {
     auto f = fused_at.find(utime);
     if (f != fused_at.end()) latency_ms.push_back(1e3 * (f->second - at));
+    auto r = rbpf_at.find(utime);
+    if (r != rbpf_at.end()) rbpf_latency_ms.push_back(1e3 * (r->second - at));
   }
   const fl::bench::Stats lat = fl::bench::ComputeStats(latency_ms);
+  const fl::bench::Stats rbpf_lat = fl::bench::ComputeStats(rbpf_latency_ms);
   run.Add("latency_ms_p50", lat.median)
       .Add("latency_ms_p99", lat.p99)
-      .Add("latency_ms_max", lat.max);
+      .Add("latency_ms_max", lat.max)
+      .Add("rbpf_latency_ms_p50", rbpf_lat.median)
+      .Add("rbpf_latency_ms_p99", rbpf_lat.p99);
   const std::map<std::string, int64_t> expected = fl::bench::SimSchedule(sim);
   int64_t total_expected = 0, lost = 0;
   for (const auto& [ch, n] : expected) {

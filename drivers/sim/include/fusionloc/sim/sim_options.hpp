@@ -149,7 +149,9 @@ struct Laser3dOptions {
 // description; the right camera is `baseline_m` to its right.
 struct CameraOptions {
   bool enabled = true;         // publish STEREO, STEREO_CALIBRATION and CAMERA_TO_BASE
-  double rate_hz = 2.0;        // [Hz] must divide the step rate
+  // [Hz] must divide the step rate. 10: the rate real stereo cameras run at (the MSIF paper's
+  // 2 Hz is an option: fl-bench-sim --camera-rate-hz 2, config/stereo_vo_2hz.yaml).
+  double rate_hz = 10.0;
   int width = 640;             // [px]
   int height = 480;            // [px]
   double fx = 400.0;           // [px] focal length (fx = fy)

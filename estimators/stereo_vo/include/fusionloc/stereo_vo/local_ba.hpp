@@ -71,13 +71,15 @@ struct LocalBaOptions {
   double huber_px = 1.0;              // [px] Huber loss width
   double outlier_threshold_px = 2.0;  // [px] larger error (max of u, v, u_right) after solve 1: out
   int min_points = 20;  // fewer shared tracks: the window is not adjusted (chained poses kept)
-  // The chained motions between consecutive keyframes as priors (see above); their covariance
-  // multiplied by motion_prior_covariance_scale. 10 by default: the frame-to-frame covariance
-  // is about 5x overconfident (chi^2 in bench sim, docs/STEREO_VO.md), and the chain and the
-  // window share the keyframes' observations. Without the prior, a window whose tracks are
-  // short (the simulator: ~2.2 keyframes per track) knows less than the chain it replaces.
+  // The chained motions between consecutive keyframes as priors (see above); their covariance,
+  // already times refine.covariance_scale (10), multiplied by motion_prior_covariance_scale:
+  // 10x the unscaled chain in all, because the frame-to-frame covariance is about 5x
+  // overconfident (chi^2 in bench sim, docs/STEREO_VO.md) and the chain and the window share the
+  // keyframes' observations (config/stereo_vo_2hz.yaml: 1 and 10, the same product). Without
+  // the prior, a window whose tracks are short (the simulator: ~2.2 keyframes per track) knows
+  // less than the chain it replaces.
   bool motion_prior = true;
-  double motion_prior_covariance_scale = 10.0;
+  double motion_prior_covariance_scale = 1.0;
   // Laser-aided mode: the observations' laser depth points as 3D point errors (see above). Off
   // by default: on the KITTI 04 snippet (the only sequence with laser data) they make the
   // laser-aided run worse, 0.615 -> 0.659 % drift (its laser depths put the path 0.3 % long
