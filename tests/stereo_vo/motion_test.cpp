@@ -105,7 +105,7 @@ TEST(StereoVoMotion, RefinementCovarianceIsConsistent) {
   for (bool joint : {true, false}) {
     RefineOptions opts;
     opts.optimize_points = joint;
-    opts.covariance_scale = 1.0;  // the two-view covariance itself (the default inflates it for chaining)
+    opts.covariance_scale = 1.0;  // the two-view covariance itself (the default is for chains)
     double nees = 0;
     const int runs = 40;
     for (int k = 0; k < runs; ++k) {
@@ -140,7 +140,7 @@ TEST(StereoVoMotion, RefinementCovarianceIsConsistent) {
 TEST(StereoVoMotion, LaserPointErrorsRecoverTheMotionBetter) {
   const Eigen::Isometry3d T = MakeMotion(0.005, 0.03, -0.01, 0.05, -0.02, 1.0);
   RefineOptions opts;
-  opts.covariance_scale = 1.0;  // the two-view covariance itself (the default inflates it for chaining)
+  opts.covariance_scale = 1.0;  // the two-view covariance itself (the default is for chains)
   double err_plain = 0, err_laser = 0, rot_plain = 0, rot_laser = 0, nees = 0;
   const int runs = 30;
   for (int k = 0; k < runs; ++k) {

@@ -150,7 +150,7 @@ struct Laser3dOptions {
 struct CameraOptions {
   bool enabled = true;         // publish STEREO, STEREO_CALIBRATION and CAMERA_TO_BASE
   // [Hz] must divide the step rate. 10: the rate real stereo cameras run at (the MSIF paper's
-  // 2 Hz is an option: fl-bench-sim --camera-rate-hz 2, config/stereo_vo_2hz.yaml).
+  // 2 Hz is an option: fl-sim --camera-rate-hz 2, with fl-stereo-vo on config/stereo_vo_2hz.yaml).
   double rate_hz = 10.0;
   int width = 640;             // [px]
   int height = 480;            // [px]
