@@ -141,6 +141,30 @@ TEST(StereoVoSim, EstimatesAnInjectedDisparityOffset) {
   EXPECT_LT(final_sd, 0.1);
 }
 
+// One simulator step into the VO: creates it at the first calibration, gives it the step's
+// odometry (as its motion prior, when on) and returns its result if the step has a stereo pair.
+std::optional<StereoVoResult> FeedVo(const fl::sim::SimFrame& frame, const StereoVoOptions& opts,
+                                     std::unique_ptr<StereoVo>* vo) {
+  if (frame.calibration && !*vo) {
+    *vo = std::make_unique<StereoVo>(
+        opts, CalibrationFromLcm(*frame.calibration, *frame.camera_to_base));
+  }
+  if (!*vo) return std::nullopt;
+  if (frame.odometry) {
+    const fl::Status s = (*vo)->AddOdometry(
+        frame.odometry->utime, Pose2(frame.odometry->x, frame.odometry->y, frame.odometry->theta));
+    EXPECT_TRUE(s.ok()) << s.message();
+  }
+  if (!frame.stereo) return std::nullopt;
+  cv::Mat left, right;
+  const fl::Status gray = StereoImagesToGray(*frame.stereo, &left, &right);
+  if (!gray.ok()) {
+    ADD_FAILURE() << gray.message();
+    return std::nullopt;
+  }
+  return (*vo)->AddStereoFrame(frame.stereo->utime, left, right);
+}
+
 // The paper's 2 Hz camera through the first turns (0.8 rad/s: 23 deg between frames). Some
 // frames of a turn share too little of the view with the previous one for any prediction; with
 // the constant-velocity guess the VO then loses the turn's rotation, with the wheel odometry as
@@ -158,21 +182,9 @@ TEST(StereoVoSim, TheOdometryPriorKeepsTheHeadingThroughTheTurnsAtTwoHertz) {
     Eigen::Isometry3d T_world_base0 = Eigen::Isometry3d::Identity();
     int frames = 0, predicted = 0, tracked = 0;
     while (sim.Step(&frame)) {
-      if (frame.calibration && !vo) {
-        vo = std::make_unique<StereoVo>(
-            opts, CalibrationFromLcm(*frame.calibration, *frame.camera_to_base));
-      }
-      if (!vo) continue;
-      if (frame.odometry) {
-        ASSERT_TRUE(vo->AddOdometry(frame.odometry->utime,
-                                    Pose2(frame.odometry->x, frame.odometry->y,
-                                          frame.odometry->theta))
-                        .ok());
-      }
-      if (!frame.stereo) continue;
-      cv::Mat left, right;
-      ASSERT_TRUE(StereoImagesToGray(*frame.stereo, &left, &right).ok());
-      const StereoVoResult r = vo->AddStereoFrame(frame.stereo->utime, left, right);
+      const std::optional<StereoVoResult> fed = FeedVo(frame, opts, &vo);
+      if (!fed) continue;
+      const StereoVoResult& r = *fed;
       const Eigen::Isometry3d T_world_base = frame.T_world_base.ToIsometry3();
       if (frames == 0) T_world_base0 = T_world_base;
       if (frames > 0 && r.state != TrackingState::kTracked) ++lost[prior];
@@ -219,21 +231,9 @@ TEST(StereoVoSim, TheDefaultCameraRateAndOptionsTrackEveryFrameThroughTheTurns) 
   int frames = 0, lost = 0;
   double turned_rad = 0, last_yaw = 0;
   while (sim.Step(&frame)) {
-    if (frame.calibration && !vo) {
-      vo = std::make_unique<StereoVo>(
-          opts, CalibrationFromLcm(*frame.calibration, *frame.camera_to_base));
-    }
-    if (!vo) continue;
-    if (frame.odometry) {
-      ASSERT_TRUE(vo->AddOdometry(frame.odometry->utime,
-                                  Pose2(frame.odometry->x, frame.odometry->y,
-                                        frame.odometry->theta))
-                      .ok());
-    }
-    if (!frame.stereo) continue;
-    cv::Mat left, right;
-    ASSERT_TRUE(StereoImagesToGray(*frame.stereo, &left, &right).ok());
-    const StereoVoResult r = vo->AddStereoFrame(frame.stereo->utime, left, right);
+    const std::optional<StereoVoResult> fed = FeedVo(frame, opts, &vo);
+    if (!fed) continue;
+    const StereoVoResult& r = *fed;
     if (frames == 0) {
       gt0 = frame.T_world_base;
       odom0 = frame.T_odom_base;
