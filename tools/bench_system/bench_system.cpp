@@ -120,13 +120,17 @@ fl::bench::Run RunOnce(const Setup& s, double stereo_hz) {
   fl::bench::Run run;
   run.name = name;
   run.input = "world " + s.world + ", " + fl::FormatDouble(s.duration_s) + " s real time";
-  std::vector<double> latency_ms, rbpf_latency_ms;
-  for (const auto& [utime, at] : laser_at) {
-    auto f = fused_at.find(utime);
-    if (f != fused_at.end()) latency_ms.push_back(1e3 * (f->second - at));
-    auto r = rbpf_at.find(utime);
-    if (r != rbpf_at.end()) rbpf_latency_ms.push_back(1e3 * (r->second - at));
-  }
+  // [ms] from each scan's arrival to the arrival of `out`'s message of the same stamp.
+  auto latencies_ms = [&](const std::map<int64_t, double>& out) {
+    std::vector<double> ms;
+    for (const auto& [utime, at] : laser_at) {
+      const auto o = out.find(utime);
+      if (o != out.end()) ms.push_back(1e3 * (o->second - at));
+    }
+    return ms;
+  };
+  const std::vector<double> latency_ms = latencies_ms(fused_at);
+  const std::vector<double> rbpf_latency_ms = latencies_ms(rbpf_at);
   const fl::bench::Stats lat = fl::bench::ComputeStats(latency_ms);
   const fl::bench::Stats rbpf_lat = fl::bench::ComputeStats(rbpf_latency_ms);
   run.Add("latency_ms_p50", lat.median)
