@@ -60,6 +60,31 @@ TEST(ScanInput, AJumpIsFlaggedAndNotAppliedAndTheNextStepCountsFromTheJumpedPose
   EXPECT_TRUE(step.odometry_jump);  // a rotation jump too
 }
 
+TEST(ScanInput, AcrossAGapInTheScansTheLimitsGrowWithTheTime) {
+  MotionOptions motion;  // 3 m, 2 rad, or 2 m/s, 2 rad/s
+  ScanInput in;
+  ScanInput::Step step;
+  Status error;
+  ASSERT_EQ(in.Accept(Scan(1'000'000), Pose2(0, 0, 0), motion, &step, &error),
+            ScanInput::Verdict::kAccepted);
+  // 5 s without scans (a laser that stopped): 3.5 m and 2.5 rad of odometry are motion.
+  ASSERT_EQ(in.Accept(Scan(6'000'000), Pose2(3.5, 0, 2.5), motion, &step, &error),
+            ScanInput::Verdict::kAccepted);
+  EXPECT_FALSE(step.odometry_jump);
+  EXPECT_NEAR(in.odom().x, 3.5, 1e-12);
+  // The same step 0.1 s later is a jump; so is 11 m after 5 s (2.2 m/s).
+  ASSERT_EQ(in.Accept(Scan(6'100'000), Pose2(3.5, 0, 2.5) * Pose2(3.5, 0, 0), motion, &step,
+                      &error),
+            ScanInput::Verdict::kAccepted);
+  EXPECT_TRUE(step.odometry_jump);
+  ASSERT_EQ(in.Accept(Scan(11'100'000), Pose2(18.0, 0, 2.5), motion, &step, &error),
+            ScanInput::Verdict::kAccepted);
+  EXPECT_TRUE(step.odometry_jump);
+  EXPECT_TRUE(motion.IsOdometryJump(Pose2(0, 0, 2.5), 1.0));
+  EXPECT_FALSE(motion.IsOdometryJump(Pose2(0, 0, 2.5), 1.5));
+  EXPECT_FALSE(motion.IsOdometryJump(Pose2(2.9, 0, 0), 0.0));
+}
+
 TEST(ScanInput, BadInputIsRefusedWithoutChangingState) {
   ScanInput in;
   MotionOptions motion;

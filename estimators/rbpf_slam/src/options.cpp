@@ -1,5 +1,6 @@
 #include "fusionloc/rbpf_slam/options.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -70,9 +71,17 @@ Status MotionOptions::Validate() const {
   FL_RETURN_IF_ERROR(NonNegative("motion.stt", stt));
   FL_RETURN_IF_ERROR(Positive("motion.max_odometry_jump_m", max_odometry_jump_m));
   FL_RETURN_IF_ERROR(Positive("motion.max_odometry_jump_rad", max_odometry_jump_rad));
+  FL_RETURN_IF_ERROR(NonNegative("motion.max_odometry_speed_mps", max_odometry_speed_mps));
+  FL_RETURN_IF_ERROR(NonNegative("motion.max_odometry_yaw_rate_rps", max_odometry_yaw_rate_rps));
   FL_RETURN_IF_ERROR(NonNegative("motion.jump_sigma_m", jump_sigma_m));
   FL_RETURN_IF_ERROR(NonNegative("motion.jump_sigma_rad", jump_sigma_rad));
   return Status::Ok();
+}
+
+bool MotionOptions::IsOdometryJump(const fl::Pose2& step, double dt_s) const {
+  const double dt = std::max(0.0, dt_s);
+  return std::hypot(step.x, step.y) > std::max(max_odometry_jump_m, max_odometry_speed_mps * dt) ||
+         std::abs(step.theta) > std::max(max_odometry_jump_rad, max_odometry_yaw_rate_rps * dt);
 }
 
 Status MatcherOptions::Validate() const {

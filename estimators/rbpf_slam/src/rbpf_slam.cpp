@@ -324,8 +324,7 @@ fl::Status RbpfSlam::PlaceLateScan(const LaserScan& scan, const fl::Pose2& odom_
   const RecentScan& before = *std::prev(after);
   // The odometry from the scan before (a step beyond the jump limits is not trusted: none).
   fl::Pose2 step = before.odom_raw.between(odom_pose);
-  if (std::hypot(step.x, step.y) > opt_.motion.max_odometry_jump_m ||
-      std::abs(step.theta) > opt_.motion.max_odometry_jump_rad) {
+  if (opt_.motion.IsOdometryJump(step, SecondsBetween(before.utime, scan.utime))) {
     step = fl::Pose2();
   }
   const fl::Pose2& T_world_kf = graph_.pose(before.keyframe);

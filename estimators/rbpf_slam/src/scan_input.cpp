@@ -56,8 +56,7 @@ ScanInput::Verdict ScanInput::Accept(const LaserScan& scan, const fl::Pose2& odo
   step->odometry_step = last_odom_raw_.between(odom_pose);
   last_odom_raw_ = odom_pose;
   const fl::Pose2& d = step->odometry_step;
-  if (std::hypot(d.x, d.y) > motion.max_odometry_jump_m ||
-      std::abs(d.theta) > motion.max_odometry_jump_rad) {
+  if (motion.IsOdometryJump(d, step->dt_s)) {
     step->odometry_jump = true;
   } else {
     odom_ = odom_ * d;

@@ -4,6 +4,7 @@
 
 #include <string>
 
+#include "fusionloc/common/geometry.hpp"
 #include "fusionloc/common/status.hpp"
 
 namespace fl::rbpf {
@@ -62,6 +63,10 @@ struct MotionOptions {
                                          //     scans is flagged as a jump and not trusted (the
                                          //     corrected CARMEN logs have steps up to 1.8 m)
   double max_odometry_jump_rad = 2.0;    // [rad] same for rotation (logs: up to 1.4 rad)
+  double max_odometry_speed_mps = 2.0;   // [m/s] ... or, between scans further apart, longer
+                                         //     than this speed times the time between them (a
+                                         //     gap in the scans is not a jump of the odometry)
+  double max_odometry_yaw_rate_rps = 2.0;  // [rad/s] same for rotation
   double jump_sigma_m = 0.3;             // [m] position noise used instead of a flagged jump
   double jump_sigma_rad = 0.3;           // [rad] heading noise used instead of a flagged jump
 
@@ -73,10 +78,16 @@ struct MotionOptions {
     a->Visit("stt", &stt);
     a->Visit("max_odometry_jump_m", &max_odometry_jump_m);
     a->Visit("max_odometry_jump_rad", &max_odometry_jump_rad);
+    a->Visit("max_odometry_speed_mps", &max_odometry_speed_mps);
+    a->Visit("max_odometry_yaw_rate_rps", &max_odometry_yaw_rate_rps);
     a->Visit("jump_sigma_m", &jump_sigma_m);
     a->Visit("jump_sigma_rad", &jump_sigma_rad);
   }
   Status Validate() const;
+  // Whether the odometry step T_prev_cur between two scans dt_s apart is a jump (a wheel-base
+  // reset, a glitch): longer than max(max_odometry_jump_m, max_odometry_speed_mps * dt_s), or
+  // turning more than max(max_odometry_jump_rad, max_odometry_yaw_rate_rps * dt_s).
+  bool IsOdometryJump(const fl::Pose2& step, double dt_s) const;
 };
 
 // Scan-to-map matcher used as the improved proposal and the likelihood-field weights (eq. 3).

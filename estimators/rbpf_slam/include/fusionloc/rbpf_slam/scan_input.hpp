@@ -5,8 +5,8 @@
 //   - the odometry pose must be finite;
 //   - the scan must have beams and a finite, non-zero angle step, and the geometry of the first
 //     scan (beam count, rad0, radstep): a laser cannot change it;
-//   - an odometry step longer than motion.max_odometry_jump_m / _rad (a wheel-base reset, a
-//     glitch) is a jump: it is not applied (odom() does not move) and the caller treats it as
+//   - an odometry step beyond motion.IsOdometryJump's limits for the time since the previous
+//     scan (a wheel-base reset, a glitch) is a jump: it is not applied (odom() does not move) and the caller treats it as
 //     "no motion plus large noise".
 #pragma once
 
