@@ -7,6 +7,7 @@
 #include <fstream>
 #include <thread>
 
+#include "fusionloc/common/process_memory.hpp"
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/status_t.hpp"
 #include "fusionloc/wheel_odometry_t.hpp"
@@ -96,6 +97,7 @@ TEST(LcmProcess, APipelineInOneProcessSeesDataTimeAndDrainsInOrder) {
       fusionloc::status_t st;
       ASSERT_GT(st.decode(ev.data.data(), 0, static_cast<int>(ev.data.size())), 0);
       EXPECT_EQ(st.utime, ev.utime);
+      for (const std::string& key : st.keys) EXPECT_NE(key, "heap_mb");  // live only
       continue;
     }
     order.push_back(ev.channel);
@@ -127,6 +129,31 @@ TEST(LcmProcess, ASilentInputIsReportedLiveInTheStatus) {
   lcm->HandleSubscriptions(100);
   EXPECT_EQ(watch.received("A"), 1);
   EXPECT_TRUE(watch.Silent().empty());
+}
+
+// Live, every process reports its heap in use (once a minute, the first at the start).
+TEST(LcmProcess, TheStatusCarriesTheHeapLive) {
+  if (!ReadHeapUsage().supported) GTEST_SKIP() << "not glibc's allocator (a sanitizer build)";
+  auto lcm = MakeLcm("memq://");
+  Doubler node(lcm.get(), "A", "B", "fl-node");
+  double heap_mb = -1.0;
+  lcm->Subscribe<fusionloc::status_t>("STATUS_FL_NODE",
+                                      [&](const fusionloc::status_t& st, const std::string&) {
+                                        for (size_t k = 0; k < st.keys.size(); ++k) {
+                                          if (st.keys[k] == "heap_mb") heap_mb = st.values[k];
+                                        }
+                                      });
+  ResetShutdownForTest();
+  std::thread stop([] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    RequestShutdown();
+  });
+  SpinNodes(lcm.get(), {&node}, nullptr);
+  stop.join();
+  ResetShutdownForTest();
+  lcm->HandleSubscriptions(0);
+  EXPECT_GT(heap_mb, 0.0);
+  EXPECT_LT(heap_mb, 10000.0);
 }
 
 // Runs a Doubler through LcmProcess::Run as a main would, returning the exit code.

@@ -7,7 +7,9 @@
 // figures for its process group), the latency from a LASER message's arrival to the arrival
 // of the FUSED_POSE of the same stamp (p99 of that minute), and the sizes the processes
 // report in their STATUS: the fusion's graph nodes and factors and map keyframes, the
-// RBPF-SLAM's keyframes, the journal's size on disk. After the warm-up, the slope of each
+// RBPF-SLAM's keyframes, the journal's size on disk, each process's heap in use (its STATUS
+// heap_mb: the allocator's count, which RSS follows since every process returns its free
+// pages once a minute). After the warm-up, the slope of each
 // (least squares) per 10 minutes: rss_slope_mb_per_10min per process (flat: |slope| < 1 MB per
 // 10 min) and size_slope_per_10min per size (bounded: the graph stops growing once the route
 // has been mapped). Messages lost: what the simulator's schedule published minus what arrived
@@ -106,7 +108,8 @@ fl::bench::Run RestoreJournal(const Setup& s, const std::string& journal, const 
       .Add("restored_inputs", static_cast<double>(node.restored_inputs()))
       .Add("restored_nodes", node.fusion().num_nodes())
       .Add("restored_retired_nodes", static_cast<double>(node.fusion().num_retired_nodes()));
-  run.note = what + ", replayed in-process as a respawned fl-fusion does: snapshot (if any), "
+  run.note = what +
+             ", replayed in-process as a respawned fl-fusion does: snapshot (if any), "
              "inputs after it, one full solve";
   return run;
 }
@@ -190,7 +193,10 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
       {"rbpf_keyframes", fl::StatusChannel("fl-rbpf-slam"), "keyframes"},
       {"journal_snapshot_mb", fl::StatusChannel("fl-fusion"), "journal_snapshot_mb"},
       {"journal_snapshot_ms", fl::StatusChannel("fl-fusion"), "journal_snapshot_ms"},
-      {"journal_mb", "", ""}};
+      {"journal_mb", "", ""},
+      {"fusion_heap_mb", fl::StatusChannel("fl-fusion"), "heap_mb"},
+      {"rbpf_heap_mb", fl::StatusChannel("fl-rbpf-slam"), "heap_mb"},
+      {"stereo_vo_heap_mb", fl::StatusChannel("fl-stereo-vo"), "heap_mb"}};
   std::vector<double> sample_t;                          // [min] since the simulator started
   std::map<std::string, std::vector<double>> rss, size;  // per process [MB] / per size
   std::vector<double> minute_p99;

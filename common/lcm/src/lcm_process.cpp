@@ -7,6 +7,7 @@
 
 #include "fusionloc/common/log.hpp"
 #include "fusionloc/common/number_format.hpp"
+#include "fusionloc/common/process_memory.hpp"
 #include "fusionloc/common/shutdown.hpp"
 #include "fusionloc/status_t.hpp"
 
@@ -72,12 +73,38 @@ std::vector<std::string> InputWatch::Silent() const {
   return out;
 }
 
+namespace {
+
+constexpr Utime kHeapHousekeepingPeriodUs = 60'000'000;
+
+// Once a minute: the heap in use and what the allocator held freed, in every node's STATUS
+// (heap_mb, heap_free_mb; live only: a replay's output does not depend on the machine), then
+// the free pages go back to the system (process_memory.hpp).
+void HeapHousekeeping(const std::vector<LcmNode*>& nodes, bool replay) {
+  const HeapUsage heap = ReadHeapUsage();
+  if (!heap.supported) return;
+  if (!replay) {
+    for (LcmNode* n : nodes) {
+      n->status().Set("heap_mb", heap.in_use_mb);
+      n->status().Set("heap_free_mb", heap.free_mb);
+    }
+  }
+  ReturnFreeHeapToSystem();
+}
+
+}  // namespace
+
 void SpinNodes(LcmInterface* lcm, const std::vector<LcmNode*>& nodes, InputWatch* watch,
                const std::function<void(double)>& progress) {
   const bool replay = lcm->replaying();
   Utime last_progress = MonotonicUtime();
+  Utime last_heap = 0;
   while (!ShutdownRequested()) {
     const int rc = lcm->HandleSubscriptions(100);
+    if (MonotonicUtime() - last_heap >= kHeapHousekeepingPeriodUs) {
+      last_heap = MonotonicUtime();
+      HeapHousekeeping(nodes, replay);
+    }
     for (LcmNode* n : nodes) {
       n->Poll();
       n->status().Tick();
