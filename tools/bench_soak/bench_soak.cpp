@@ -9,9 +9,9 @@
 // report in their STATUS: the fusion's graph nodes and factors and map keyframes, the
 // RBPF-SLAM's keyframes, the journal's size on disk, each process's heap in use (its STATUS
 // heap_mb: the allocator's count, which RSS follows since every process returns its free
-// pages once a minute). After the warm-up, the slope of each
-// (least squares) per 10 minutes: rss_slope_mb_per_10min per process (flat: |slope| < 1 MB per
-// 10 min) and size_slope_per_10min per size (bounded: the graph stops growing once the route
+// pages once a minute). After the warm-up, the slope of each (least squares) per 10 minutes:
+// rss_slope_mb_per_10min per process (flat: |slope| < 1 MB per 10 min) and
+// size_slope_per_10min per size (bounded: the graph stops growing once the route
 // has been mapped). Messages lost: what the simulator's schedule published minus what arrived
 // here. The online FUSED_POSE against GROUND_TRUTH: one SE(2) alignment over the run, the RMS
 // error overall and per minute (OUT/fused_ate_per_minute.csv). Every sample also goes to

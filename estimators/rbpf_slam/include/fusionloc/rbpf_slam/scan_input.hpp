@@ -6,8 +6,8 @@
 //   - the scan must have beams and a finite, non-zero angle step, and the geometry of the first
 //     scan (beam count, rad0, radstep): a laser cannot change it;
 //   - an odometry step beyond motion.IsOdometryJump's limits for the time since the previous
-//     scan (a wheel-base reset, a glitch) is a jump: it is not applied (odom() does not move) and the caller treats it as
-//     "no motion plus large noise".
+//     scan (a wheel-base reset, a glitch) is a jump: it is not applied (odom() does not move)
+//     and the caller treats it as "no motion plus large noise".
 #pragma once
 
 #include <cstddef>
