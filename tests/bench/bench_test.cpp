@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "process_fixtures.hpp"
 #include "test_paths.hpp"
 
 namespace fl::bench {
@@ -61,15 +62,7 @@ TEST(Bench, RecordReplacesOnlyItsOwnSection) {
   EXPECT_NE(text.find("| intel | 0.25 | 910 |"), std::string::npos) << text;
 }
 
-// [MB] the resident memory of this process now (VmRSS), read independently of PeakRssMb.
-double CurrentRssMb() {
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  while (std::getline(status, line)) {
-    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
-  }
-  return -1.0;
-}
+using test::CurrentRssMb;  // read independently of PeakRssMb
 
 // Touching 50 MB raises the peak to about the resident size plus 50 MB (in MB, not kB or
 // pages), and freeing them leaves the peak where it was (the high-water mark, not the current

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <fstream>
 #include <functional>
 #include <string>
 #include <thread>
@@ -20,6 +21,16 @@ inline pid_t Spawn(const std::string& command) {
     _exit(127);
   }
   return pid;
+}
+
+// [MB] the resident memory of this process now (VmRSS of /proc/self/status); -1 if unreadable.
+inline double CurrentRssMb() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  }
+  return -1.0;
 }
 
 // Polls `done` every 50 ms until it is true (returns true) or `timeout_s` passes (false).
