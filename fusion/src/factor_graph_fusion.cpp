@@ -356,17 +356,19 @@ int FactorGraphFusion::TimelineSize() const {
 
 Utime FactorGraphFusion::TimelineUtime(int k) const {
   const int r = static_cast<int>(retired_.size());
-  return k < r ? retired_[k].utime : nodes_[num_fixed_ + k - r].utime;
+  return k < r ? retired_.at(static_cast<size_t>(k)).utime : nodes_[num_fixed_ + k - r].utime;
 }
 
 Pose2 FactorGraphFusion::TimelinePose(int k) const {
   const int r = static_cast<int>(retired_.size());
-  return k < r ? retired_[k].T_map_base : ToPose2(nodes_[num_fixed_ + k - r].state);
+  return k < r ? retired_.at(static_cast<size_t>(k)).T_map_base
+               : ToPose2(nodes_[num_fixed_ + k - r].state);
 }
 
-const Pose2& FactorGraphFusion::TimelineRbpf(int k) const {
+Pose2 FactorGraphFusion::TimelineRbpf(int k) const {
   const int r = static_cast<int>(retired_.size());
-  return k < r ? retired_[k].T_map_base_rbpf : nodes_[num_fixed_ + k - r].T_map_base_rbpf;
+  return k < r ? retired_.at(static_cast<size_t>(k)).T_map_base_rbpf
+               : nodes_[num_fixed_ + k - r].T_map_base_rbpf;
 }
 
 void FactorGraphFusion::TimelineNode(int k, int* node, Pose2* T_node_k) const {
@@ -376,7 +378,7 @@ void FactorGraphFusion::TimelineNode(int k, int* node, Pose2* T_node_k) const {
     *T_node_k = Pose2();
     return;
   }
-  const RetiredNode& d = retired_[k];
+  const RetiredRecord d = retired_.at(static_cast<size_t>(k));
   const auto it = std::lower_bound(nodes_.begin(), nodes_.begin() + num_fixed_, d.anchor_utime,
                                    [](const Node& n, Utime time) { return n.utime < time; });
   *node = static_cast<int>(it - nodes_.begin());
@@ -384,15 +386,14 @@ void FactorGraphFusion::TimelineNode(int k, int* node, Pose2* T_node_k) const {
 }
 
 int FactorGraphFusion::TimelineLowerBound(Utime t) const {
-  int lo = 0, hi = TimelineSize();
-  while (lo < hi) {
-    const int mid = lo + (hi - lo) / 2;
-    if (TimelineUtime(mid) < t)
-      lo = mid + 1;
-    else
-      hi = mid;
+  // The retired part (in memory or spilled) only for times it covers: the recent times most
+  // lookups ask for never touch a spill file.
+  if (!retired_.empty() && t <= retired_.back().utime) {
+    return static_cast<int>(retired_.LowerBound(t));
   }
-  return lo;
+  const auto it = std::lower_bound(nodes_.begin() + num_fixed_, nodes_.end(), t,
+                                   [](const Node& n, Utime time) { return n.utime < time; });
+  return static_cast<int>(retired_.size()) + static_cast<int>(it - (nodes_.begin() + num_fixed_));
 }
 
 bool FactorGraphFusion::Attach(Utime t, int* node, Pose2* T_node_t) const {
@@ -817,7 +818,8 @@ bool FactorGraphFusion::PoseAt(Utime t, Pose2* T_map_base) const {
   // The trajectory: the retired nodes (frozen), then the active nodes.
   auto utime = [&](int k) { return TimelineUtime(k); };
   auto pose = [&](int k) { return TimelinePose(k); };
-  if (t < utime(0) || t > utime(TimelineSize() - 1)) return false;
+  const Utime first = retired_.empty() ? nodes_[num_fixed_].utime : retired_.front_utime();
+  if (t < first || t > utime(TimelineSize() - 1)) return false;
   const int lo = TimelineLowerBound(t);
   if (utime(lo) == t) {
     *T_map_base = pose(lo);
@@ -830,14 +832,11 @@ bool FactorGraphFusion::PoseAt(Utime t, Pose2* T_map_base) const {
 }
 
 std::vector<TrajectoryPoint> FactorGraphFusion::Trajectory(Utime from) const {
-  const auto first_retired =
-      std::lower_bound(retired_.begin(), retired_.end(), from,
-                       [](const RetiredNode& d, Utime t) { return d.utime < t; });
+  const size_t first_retired = retired_.LowerBound(from);
   std::vector<TrajectoryPoint> out;
-  out.reserve(static_cast<size_t>(retired_.end() - first_retired) + nodes_.size());
-  for (auto it = first_retired; it != retired_.end(); ++it) {
-    out.push_back({it->utime, it->T_map_base});
-  }
+  out.reserve(retired_.size() - first_retired + nodes_.size());
+  retired_.ForEach(first_retired,
+                   [&out](const RetiredRecord& d) { out.push_back({d.utime, d.T_map_base}); });
   for (int k = num_fixed_; k < num_nodes(); ++k) {
     if (nodes_[k].utime >= from) out.push_back({nodes_[k].utime, ToPose2(nodes_[k].state)});
   }
@@ -961,7 +960,7 @@ void FactorGraphFusion::MakeCost(Factor* f) const {
 // factors. Each read names what it reads, so that a damaged state names its field.
 namespace {
 constexpr char kStateMagic[] = "FLFUSION";
-constexpr uint32_t kStateVersion = 1;
+constexpr uint32_t kStateVersion = 2;  // 2: the retired trajectory may be spilled
 
 void PutSummary(StateWriter* w, const SolveSummary& s) {
   w->Put(static_cast<uint8_t>(s.ran));
@@ -1050,7 +1049,6 @@ constexpr size_t kNodeBytes = 8 + 3 * 8 + 3 * 8 + 1;
 constexpr size_t kFactorBytes = 4 + 4 + 3 * 8 + 2 * 9 * 8 + 3;
 constexpr size_t kPendingBytes = 8 + 8 + 16 * 8 + 36 * 8 + 2 + 3 * 8 + 9 * 8;
 constexpr size_t kPoseSampleBytes = 8 + 3 * 8;
-constexpr size_t kRetiredBytes = 8 + 6 * 8 + 8;
 
 }  // namespace
 
@@ -1090,13 +1088,7 @@ void FactorGraphFusion::SaveState(StateWriter* w) const {
   }
   w->PutCount(late_placed_.size());
   for (Utime t : late_placed_) w->Put(t);
-  w->PutCount(retired_.size());
-  for (const RetiredNode& r : retired_) {
-    w->Put(r.utime);
-    w->Put(r.T_map_base);
-    w->Put(r.T_map_base_rbpf);
-    w->Put(r.anchor_utime);
-  }
+  retired_.SaveState(w);
   w->Put(static_cast<int32_t>(next_odom_pair_));
   w->Put(static_cast<int32_t>(oldest_touched_node_));
   w->Put(static_cast<uint8_t>(full_solve_requested_));
@@ -1168,18 +1160,8 @@ void FactorGraphFusion::LoadState(StateReader* r) {
   }
   const size_t num_late = r->Count(8, "late laser pose stamps");
   for (size_t k = 0; k < num_late; ++k) s.late_placed_.insert(r->Get<int64_t>("late stamp"));
-  const size_t num_retired = r->Count(kRetiredBytes, "retired nodes");
-  for (size_t k = 0; k < num_retired; ++k) {
-    RetiredNode rn;
-    rn.utime = r->Get<int64_t>("retired.utime");
-    rn.T_map_base = GetFinitePose(r, "retired.T_map_base");
-    rn.T_map_base_rbpf = GetFinitePose(r, "retired.T_map_base_rbpf");
-    rn.anchor_utime = r->Get<int64_t>("retired.anchor_utime");
-    if (!s.retired_.empty() && rn.utime <= s.retired_.back().utime) {
-      r->Fail("retired node " + std::to_string(k) + " is not after the previous one");
-    }
-    s.retired_.push_back(rn);
-  }
+  s.retired_.SpillTo(retired_.spill_file(), retired_.keep_in_memory(), retired_.spill_batch());
+  s.retired_.LoadState(r);
   s.next_odom_pair_ = r->Get<int32_t>("next_odom_pair");
   s.oldest_touched_node_ = r->Get<int32_t>("oldest_touched_node");
   s.full_solve_requested_ = r->GetBool("full_solve_requested");
@@ -1203,14 +1185,15 @@ void FactorGraphFusion::LoadState(StateReader* r) {
       s.retired_.back().utime >= s.nodes_[s.num_fixed_].utime) {
     r->Fail("the retired nodes must be older than the active ones");
   }
-  for (const RetiredNode& rn : s.retired_) {
+  // Every retired pose's anchor is a map node (the spilled ones read back from their file).
+  s.retired_.ForEach(0, [&s, r](const RetiredRecord& rn) {
     const auto it = std::lower_bound(
         s.nodes_.begin(), s.nodes_.begin() + s.num_fixed_, rn.anchor_utime,
         [](const Node& node, Utime time) { return node.utime < time; });
     if (it == s.nodes_.begin() + s.num_fixed_ || it->utime != rn.anchor_utime) {
       r->Fail("retired node at utime " + std::to_string(rn.utime) + ": no map node at its anchor");
     }
-  }
+  });
   *this = std::move(s);
 }
 

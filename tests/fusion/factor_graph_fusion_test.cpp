@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <random>
 
 #include "fusion_fixtures.hpp"
+#include "test_paths.hpp"
 #include "fusionloc/common/se2_between_cost.hpp"
 #include "fusionloc/common/sqrt_information.hpp"
 
@@ -907,6 +909,83 @@ TEST(FusionFactorGraph, ASavedStateGoesOnExactlyAsTheOriginal) {
   EXPECT_EQ(loaded.counters().odometry_factors, original.counters().odometry_factors);
   EXPECT_EQ(loaded.counters().merged_nodes, original.counters().merged_nodes);
   EXPECT_EQ(loaded.num_map_nodes(), original.num_map_nodes());
+}
+
+TEST(FusionFactorGraph, ASpilledRetiredTrajectoryChangesNoResult) {
+  // The same inputs into a fusion that keeps its retired trajectory in memory and into one that
+  // spills all but the newest 20 poses to a file: bit-identical trajectories, poses at retired
+  // times, and late factors onto them; the spilling one saved halfway and restored from its
+  // snapshot and (a copy of) its file goes on identically too, and its snapshot is smaller.
+  FusionSimOptions so;
+  so.laps = 6;
+  so.laser_sigma_xy = 0.01;
+  so.laser_sigma_theta = 0.003;
+  so.vision_sigma_xy = 0.02;
+  so.vision_sigma_theta = 0.005;
+  const FusionSimData d = MakeRoundedSquareSim(so);
+  FusionOptions o = TestOptions();
+  o.use_wheel_odometry = true;
+  o.full_solve_every_n_nodes = 100;
+  o.max_window_nodes = 100;
+  o.active_window_s = 30.0;
+  fl::test::TempDir dir;
+  FactorGraphFusion in_memory(o), spilled(o);
+  spilled.SpillRetiredTrajectory(std::make_shared<RetiredSpillFile>(dir.file("a.retired")), 20,
+                                 /*batch=*/100);
+  const size_t half = d.rbpf.size() * 3 / 4;
+  FeedSteps(d, 0, half, &in_memory);
+  FeedSteps(d, 0, half, &spilled);
+  ASSERT_GE(spilled.retired_trajectory().spilled(), 500u);
+  StateWriter w_memory, w_spilled;
+  in_memory.SaveState(&w_memory);
+  spilled.SaveState(&w_spilled);
+  EXPECT_EQ(w_memory.bytes().size() - w_spilled.bytes().size(),
+            spilled.retired_trajectory().spilled() * RetiredSpillFile::kRecordBytes);
+  std::filesystem::copy_file(dir.file("a.retired"), dir.file("b.retired"));
+  FactorGraphFusion restored(o);
+  restored.SpillRetiredTrajectory(std::make_shared<RetiredSpillFile>(dir.file("b.retired")), 20,
+                                  /*batch=*/100);
+  StateReader r(w_spilled.bytes().data(), w_spilled.bytes().size());
+  restored.LoadState(&r);
+
+  std::vector<FactorGraphFusion*> all = {&in_memory, &spilled, &restored};
+  for (FactorGraphFusion* f : all) FeedSteps(d, half, d.rbpf.size(), f);
+  // A late loop closure from the newest node onto a pose retired (and spilled) long ago.
+  const size_t old = 57;
+  RelativePoseFactor loop;
+  loop.utime_i = d.truth.back().utime;
+  loop.utime_j = d.truth[old].utime + 20000;  // between two scans: interpolated
+  loop.T_i_j = d.truth.back()
+                   .T_map_base.between(Interpolate(d.truth[old].T_map_base,
+                                                   d.truth[old + 1].T_map_base, 0.2))
+                   .ToIsometry3();
+  loop.information.diagonal() << 1e4, 1e4, 0, 0, 0, 1e5;
+  loop.is_loop_closure = true;
+  for (FactorGraphFusion* f : all) {
+    ASSERT_TRUE(f->AddFactor(loop).ok());
+    f->FullSolve();
+  }
+  EXPECT_EQ(spilled.counters().factors_added, in_memory.counters().factors_added);
+  const auto a = in_memory.Trajectory();
+  ASSERT_EQ(a.size(), d.truth.size());
+  for (const FactorGraphFusion* f : {&spilled, &restored}) {
+    const auto b = f->Trajectory();
+    ASSERT_EQ(b.size(), a.size());
+    for (size_t k = 0; k < a.size(); ++k) {
+      ASSERT_EQ(a[k].utime, b[k].utime);
+      ASSERT_EQ(a[k].T_map_base.x, b[k].T_map_base.x) << k;
+      ASSERT_EQ(a[k].T_map_base.theta, b[k].T_map_base.theta) << k;
+    }
+    for (const Utime t : {d.truth[old].utime + 30000, d.truth[old * 5].utime, a.back().utime}) {
+      Pose2 p, q;
+      ASSERT_TRUE(in_memory.PoseAt(t, &p));
+      ASSERT_TRUE(f->PoseAt(t, &q));
+      EXPECT_EQ(p.x, q.x);
+      EXPECT_EQ(p.y, q.y);
+    }
+    EXPECT_LT(f->retired_trajectory().in_memory(), 20u + 100u);
+  }
+  EXPECT_EQ(in_memory.retired_trajectory().spilled(), 0u);
 }
 
 TEST(FusionFactorGraph, ADamagedSavedStateIsRefusedAndChangesNothing) {

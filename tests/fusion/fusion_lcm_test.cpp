@@ -47,7 +47,8 @@ struct FusionRun {
 // `offset` [us] shifts every time (another run); `snapshot_s`: the journal's snapshot period.
 FusionRun RunFusion(const std::string& journal, int first, int last, bool finish,
                     Utime offset = 0, double snapshot_s = 120.0,
-                    const FusionProcessConfig& config = FusionProcessConfig()) {
+                    const FusionProcessConfig& config = FusionProcessConfig(),
+                    size_t retired_in_memory = RetiredTrajectory::kDefaultKeepInMemory) {
   auto lcm = MakeLcm("memq://");
   FusionRun run;
   lcm->Subscribe<fusionloc::fused_pose_t>(
@@ -61,6 +62,7 @@ FusionRun RunFusion(const std::string& journal, int first, int last, bool finish
   options.sync_full_solve = true;
   options.journal = journal;
   options.journal_snapshot_s = snapshot_s;
+  options.retired_in_memory = retired_in_memory;
   FusionNode node(config, options, lcm.get(), ChannelMap());
   for (int k = first; k < last; ++k) {
     fusionloc::wheel_odometry_t odom{};
@@ -240,6 +242,28 @@ TEST(FusionNodeJournal, SnapshotsBoundTheJournalAndARespawnGoesOnFromOne) {
   ASSERT_EQ(after.poses.size(), static_cast<size_t>(kSteps - 20));
   EXPECT_LT(Distance(after.poses.front(), TruePose(20)), 1e-3);
   EXPECT_GE(after.poses.back().num_nodes, kSteps);
+  ExpectSameFinalTrajectory(calm, after);
+}
+
+TEST(FusionNodeJournal, TheRetiredTrajectoryIsSpilledBesideTheJournalAndRestoredFromIt) {
+  // A 10 s active window, 50 s of data, 20 retired poses kept in memory: the older ones go to
+  // JOURNAL.retired. Killed at 40 s and respawned, the fusion adopts that file from its
+  // snapshot and ends with the undisturbed whole trajectory.
+  test::TempDir dir;
+  FusionProcessConfig config;
+  config.graph.active_window_s = 10.0;
+  constexpr int kLong = 500;
+  const FusionRun calm = RunFusion("", 0, kLong, true, 0, 120.0, config);
+  const std::string journal = dir.file("fusion.journal");
+  RunFusion(journal, 0, 400, false, 0, 2.0, config, /*retired_in_memory=*/20);
+  const std::string retired = journal + ".retired";
+  ASSERT_TRUE(std::filesystem::exists(retired));
+  EXPECT_GE(std::filesystem::file_size(retired),
+            RetiredSpillFile::kHeaderBytes + 100 * RetiredSpillFile::kRecordBytes);
+  const FusionRun after = RunFusion(journal, 400, kLong, true, 0, 2.0, config, 20);
+  ASSERT_EQ(after.poses.size(), static_cast<size_t>(kLong - 400));
+  EXPECT_LT(Distance(after.poses.front(), TruePose(400)), 1e-3);
+  ASSERT_EQ(calm.trajectories.back().num_poses, kLong);
   ExpectSameFinalTrajectory(calm, after);
 }
 

@@ -183,6 +183,7 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
   const std::string dir = s.out_dir + "/" + sc.name;
   std::filesystem::create_directories(dir);
   std::filesystem::remove(dir + "/fusion.journal");
+  std::filesystem::remove(dir + "/fusion.journal.retired");
   const int port = s.port + 3 * index;
   auto url = [&](int p) {
     return "udpm://239.255.76.67:" + std::to_string(p) + "?ttl=0&recv_buf_size=16777216";

@@ -90,6 +90,11 @@ fl::bench::Run RestoreJournal(const Setup& s, const std::string& journal, const 
   }
   const std::string copy = journal + ".restore-check";
   std::filesystem::copy_file(journal, copy, std::filesystem::copy_options::overwrite_existing);
+  // Its retired trajectory beyond the newest 10 minutes (FusionNodeOptions::journal).
+  if (std::filesystem::exists(journal + ".retired", ec)) {
+    std::filesystem::copy_file(journal + ".retired", copy + ".retired",
+                               std::filesystem::copy_options::overwrite_existing);
+  }
   const auto config =
       fl::LoadYamlFile<fl::fusion::FusionProcessConfig>(s.config_dir + "/fusion.yaml");
   fl::fusion::FusionNodeOptions options;
@@ -103,11 +108,14 @@ fl::bench::Run RestoreJournal(const Setup& s, const std::string& journal, const 
   const double restore_s = NowSeconds() - t0;
   std::filesystem::remove(copy, ec);
   std::filesystem::remove(copy + ".new", ec);
+  std::filesystem::remove(copy + ".retired", ec);
   run.Add("journal_mb", static_cast<double>(bytes) / 1048576.0)
       .Add("restore_ms", 1e3 * restore_s)
       .Add("restored_inputs", static_cast<double>(node.restored_inputs()))
       .Add("restored_nodes", node.fusion().num_nodes())
-      .Add("restored_retired_nodes", static_cast<double>(node.fusion().num_retired_nodes()));
+      .Add("restored_retired_nodes", static_cast<double>(node.fusion().num_retired_nodes()))
+      .Add("restored_retired_spilled",
+           static_cast<double>(node.fusion().retired_trajectory().spilled()));
   run.note = what +
              ", replayed in-process as a respawned fl-fusion does: snapshot (if any), "
              "inputs after it, one full solve";
@@ -129,6 +137,7 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
   const double warmup_s =
       60.0 * (s.warmup_minutes >= 0 ? s.warmup_minutes : std::min(10.0, s.minutes / 3.0));
   std::filesystem::remove(dir + "/fusion.journal");
+  std::filesystem::remove(dir + "/fusion.journal.retired");
 
   const std::string url =
       "udpm://239.255.76.67:" + std::to_string(s.port) + "?ttl=0&recv_buf_size=16777216";
@@ -195,6 +204,8 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
       {"journal_snapshot_ms", fl::StatusChannel("fl-fusion"), "journal_snapshot_ms"},
       {"journal_mb", "", ""},
       {"fusion_heap_mb", fl::StatusChannel("fl-fusion"), "heap_mb"},
+      {"retired_in_memory", fl::StatusChannel("fl-fusion"), "retired_in_memory"},
+      {"retired_spilled", fl::StatusChannel("fl-fusion"), "retired_spilled"},
       {"rbpf_heap_mb", fl::StatusChannel("fl-rbpf-slam"), "heap_mb"},
       {"stereo_vo_heap_mb", fl::StatusChannel("fl-stereo-vo"), "heap_mb"}};
   std::vector<double> sample_t;                          // [min] since the simulator started
@@ -207,6 +218,7 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
   csv << ",latency_ms_p99\n";
   std::uintmax_t largest_journal_bytes = 0;  // of fusion.journal.largest
   std::filesystem::remove(dir + "/fusion.journal.largest");
+  std::filesystem::remove(dir + "/fusion.journal.largest.retired");
   size_t latency_from = 0;  // laser_at is ordered by stamp = arrival order of the simulator
   std::vector<double> all_latency_ms;
 
@@ -237,6 +249,12 @@ int RunSoak(const Setup& s, fl::bench::Report* report) {
         if (!ec && bytes > largest_journal_bytes) {
           std::filesystem::copy_file(dir + "/fusion.journal", dir + "/fusion.journal.largest",
                                      std::filesystem::copy_options::overwrite_existing, ec);
+          // The retired trajectory after it: at least what the snapshot counts.
+          if (!ec && std::filesystem::exists(dir + "/fusion.journal.retired", ec)) {
+            std::filesystem::copy_file(dir + "/fusion.journal.retired",
+                                       dir + "/fusion.journal.largest.retired",
+                                       std::filesystem::copy_options::overwrite_existing, ec);
+          }
           if (!ec) largest_journal_bytes = bytes;
         }
       } else if (status.count(z.channel) && status[z.channel].count(z.key)) {

@@ -180,6 +180,14 @@ void FusionNode::Handle(const std::string& channel, std::function<void(const Msg
 void FusionNode::RestoreFromJournal() {
   const std::string& path = node_options_.journal;
   if (path.empty() || lcm_->replaying()) return;
+  try {
+    retired_file_ = std::make_shared<RetiredSpillFile>(path + ".retired");
+    fusion_ = NewGraph();
+  } catch (const std::exception& ex) {
+    FL_LOG(ERROR) << ex.what() << "; the retired trajectory stays in memory (it grows by "
+                  << "2.3 MB an hour at 10 Hz)";
+    retired_file_.reset();
+  }
   std::error_code ec;
   std::vector<LcmLogEvent> events;
   if (std::filesystem::exists(path, ec)) {
@@ -232,7 +240,9 @@ void FusionNode::RestoreFromJournal() {
       LoadState(events.front().data);
       first_input = 1;
       from_snapshot = "a snapshot of " + std::to_string(fusion_.num_nodes()) + " nodes and " +
-                      std::to_string(fusion_.num_retired_nodes()) + " retired, then ";
+                      std::to_string(fusion_.num_retired_nodes()) + " retired (" +
+                      std::to_string(fusion_.retired_trajectory().spilled()) + " of them in " +
+                      path + ".retired), then ";
     } catch (const std::exception& ex) {
       FL_LOG(WARN) << "journal " << path << ": its snapshot cannot be used (" << ex.what()
                    << "): starting a new graph";
@@ -306,7 +316,7 @@ void FusionNode::LoadState(const std::vector<uint8_t>& bytes) {
   r.Get(&T_base_camera, "T_base_camera");
   if (!T_base_camera.allFinite()) r.Fail("T_base_camera is not finite");
   const bool have_camera_to_base = r.GetBool("have_camera_to_base");
-  FactorGraphFusion fusion(config_.graph);
+  FactorGraphFusion fusion = NewGraph();
   fusion.LoadState(&r);
   PointMap map(config_.map);
   map.LoadState(&r);
@@ -361,8 +371,18 @@ void FusionNode::SnapshotJournal() {
   }
 }
 
+FactorGraphFusion FusionNode::NewGraph() const {
+  FactorGraphFusion fusion(config_.graph);
+  if (retired_file_) {
+    const size_t keep = std::max<size_t>(1, node_options_.retired_in_memory);
+    fusion.SpillRetiredTrajectory(retired_file_, keep,
+                                  std::min(keep, RetiredTrajectory::kDefaultSpillBatch));
+  }
+  return fusion;
+}
+
 void FusionNode::Reset() {
-  fusion_ = FactorGraphFusion(config_.graph);
+  fusion_ = NewGraph();
   map_ = PointMap(config_.map);
   last_utime_ = 0;
   last_trajectory_utime_ = 0;
@@ -490,6 +510,12 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   status_.Set("map_points", static_cast<double>(map_.stored_points()));
   status_.Set("map_nodes", fusion_.num_map_nodes());
   status_.Set("retired_nodes", static_cast<double>(fusion_.num_retired_nodes()));
+  if (retired_file_) {
+    const RetiredTrajectory& retired = fusion_.retired_trajectory();
+    status_.Set("retired_in_memory", static_cast<double>(retired.in_memory()));
+    status_.Set("retired_spilled", static_cast<double>(retired.spilled()));
+    if (!retired.spill_error().empty()) spill_warning_.Warn(retired.spill_error());
+  }
   status_.Set("reanchored_factors", static_cast<double>(fusion_.counters().reanchored_factors));
   if (u.ran) {
     status_.SetState(fusionloc::status_t::LEVEL_OK,

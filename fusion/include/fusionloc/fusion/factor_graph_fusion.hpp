@@ -116,6 +116,7 @@
 #include "fusionloc/common/state_buffer.hpp"
 #include "fusionloc/common/status.hpp"
 #include "fusionloc/common/time.hpp"
+#include "fusionloc/fusion/retired_trajectory.hpp"
 
 namespace fl::fusion {
 
@@ -332,6 +333,17 @@ class FactorGraphFusion {
   int num_nodes() const { return static_cast<int>(nodes_.size()); }
   int num_map_nodes() const { return num_fixed_; }
   int64_t num_retired_nodes() const { return static_cast<int64_t>(retired_.size()); }
+  // The retired trajectory (in memory and spilled; spill_error()).
+  const RetiredTrajectory& retired_trajectory() const { return retired_; }
+  // Spills the retired trajectory older than the newest keep_in_memory poses into `file`, so
+  // that memory and the saved state stay bounded on a robot that runs for days
+  // (retired_trajectory.hpp). Only while nothing is retired (std::logic_error otherwise); a
+  // LoadState keeps this object's file.
+  void SpillRetiredTrajectory(std::shared_ptr<RetiredSpillFile> file,
+                              size_t keep_in_memory = RetiredTrajectory::kDefaultKeepInMemory,
+                              size_t batch = RetiredTrajectory::kDefaultSpillBatch) {
+    retired_.SpillTo(std::move(file), keep_in_memory, batch);
+  }
   // Poses at or before this time are final (retired, frozen); 0 while nothing is retired.
   Utime final_until() const { return retired_.empty() ? 0 : retired_.back().utime; }
   int num_factors() const { return static_cast<int>(factors_.size()); }
@@ -344,7 +356,8 @@ class FactorGraphFusion {
   // calls depend on (nodes, factors, pending factors, odometry, retired nodes, counters), so
   // that a fusion loaded from it and given the same inputs goes on exactly as this one would.
   // The options are not saved: the loader's are used (the caller checks they are the same).
-  // Not while a full-solve job is outstanding (std::logic_error). LoadState replaces this
+  // Of a spilled retired trajectory only the count is saved: the loader must be bound to the
+  // same file (SpillRetiredTrajectory), which must still hold those poses. Not while a full-solve job is outstanding (std::logic_error). LoadState replaces this
   // object's state, or throws StateError (naming the byte offset) and leaves it unchanged.
   void SaveState(StateWriter* out) const;
   void LoadState(StateReader* in);
@@ -356,13 +369,6 @@ class FactorGraphFusion {
     Eigen::Vector3d state = Eigen::Vector3d::Zero();  // fused T_map_base (x, y, theta)
     std::vector<int> factors;                         // indices into factors_
     bool fixed = false;                               // a map node (retired, constant)
-  };
-  // A node that left the optimised graph, its fused pose frozen.
-  struct RetiredNode {
-    Utime utime = 0;
-    Pose2 T_map_base;        // fused, frozen
-    Pose2 T_map_base_rbpf;   // input pose (interpolation of late factor times)
-    Utime anchor_utime = 0;  // the map node it is kept as or merged into
   };
   struct Factor {
     int i = -1, j = -1;  // node indices; j = -1 for the prior
@@ -412,7 +418,7 @@ class FactorGraphFusion {
   int TimelineSize() const;
   Utime TimelineUtime(int k) const;
   Pose2 TimelinePose(int k) const;  // fused pose of timeline entry k (frozen if retired)
-  const Pose2& TimelineRbpf(int k) const;
+  Pose2 TimelineRbpf(int k) const;
   // The first timeline entry at or after t (TimelineSize() if none).
   int TimelineLowerBound(Utime t) const;
   // The graph node and T_node_k of timeline entry k (a retired one: its map node).
@@ -430,7 +436,7 @@ class FactorGraphFusion {
   int oldest_touched_node_ = -1;  // oldest node touched by factors since last Update
   bool full_solve_requested_ = false;
   int64_t nodes_at_last_full_solve_ = 0;  // counters_.nodes at the last full solve
-  std::deque<RetiredNode> retired_;
+  RetiredTrajectory retired_;  // the nodes that left the graph, their fused poses frozen
   int num_fixed_ = 0;             // nodes_[0, num_fixed_) are the map nodes
   bool job_outstanding_ = false;  // PrepareFullSolve() ... ApplyFullSolve(): indices held
   Utime optimised_until_ = 0;     // newest node of the last Update() or applied full solve

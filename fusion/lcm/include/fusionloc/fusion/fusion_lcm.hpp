@@ -49,7 +49,10 @@ struct FusionNodeOptions {
   // journal that is older, unreadable, or whose data time lies ahead of the live data (another
   // run) is set aside and a new graph is started. Its size: the last snapshot
   // (journal_snapshot_s) and the inputs since, about 0.4 MB per minute with stereo at 2 Hz.
-  // "" = none.
+  // Beside it, JOURNAL.retired holds the retired trajectory older than its newest 10 minutes
+  // (retired_trajectory.hpp: 64 bytes a scan, 2.3 MB an hour at 10 Hz, read back only for old
+  // times), so that memory and snapshots stay bounded over days. "" = none (the whole retired
+  // trajectory stays in memory).
   std::string journal;
   double journal_max_age_s = 30.0;  // [s] wall-clock age of a usable journal
   // [s] of data time between journal snapshots: the journal is rewritten as the fusion's saved
@@ -57,6 +60,9 @@ struct FusionNodeOptions {
   // inputs taken since, so that its size and a respawn's replay are bounded by the state and
   // this period instead of growing with the run. 0 = never (every input since the start).
   double journal_snapshot_s = 120.0;
+  // Retired poses kept in memory when JOURNAL.retired is used (the newest; the rest are spilled
+  // min(this, 1000) at a time).
+  size_t retired_in_memory = RetiredTrajectory::kDefaultKeepInMemory;
 
   void AddFlags(CommandLine* cli);
 };
@@ -116,6 +122,8 @@ class FusionNode : public LcmNode {
   // failure (a full disk) the journal goes on as it was, with an error logged.
   void SnapshotJournal();
   std::string ConfigText() const;  // the configuration as YAML (a snapshot must match it)
+  // A graph with this node's options and retired-trajectory file.
+  FactorGraphFusion NewGraph() const;
   // A new graph and map (a journal of another run).
   void Reset();
 
@@ -145,6 +153,9 @@ class FusionNode : public LcmNode {
   std::map<std::string, std::function<bool(const void* data, int size)>> journal_handlers_;
   std::unique_ptr<LcmLogWriter> journal_writer_;
   RateLimitedWarning journal_warning_;  // the journal cannot be written
+  // JOURNAL.retired (FusionNodeOptions::journal), bound to every graph this node makes.
+  std::shared_ptr<RetiredSpillFile> retired_file_;
+  RateLimitedWarning spill_warning_;  // the retired trajectory cannot be spilled
   bool restoring_ = false;
   bool restored_ = false;     // the graph came from a journal, no live pose yet
   Utime restored_until_ = 0;  // data time of the journal's newest node
