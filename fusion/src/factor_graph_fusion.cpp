@@ -110,6 +110,12 @@ Status FusionOptions::Validate() const {
     return Status::Error("laser_chain_factors '" + laser_chain_factors +
                          "' unknown; use odometry_gaps, always or never");
   }
+  if (!(odometry_nodes_after_s >= 0.0 && odometry_nodes_after_s <= 3600.0) ||
+      !(odometry_node_period_s > 0.0 && odometry_node_period_s <= 10.0)) {
+    return Status::Error(
+        "odometry_nodes_after_s must be in [0, 3600] s (0: never) and odometry_node_period_s "
+        "in (0, 10] s");
+  }
   if (max_pending_factors < 1) return Status::Error("max_pending_factors must be >= 1");
   if (!(active_window_s == 0.0 || (active_window_s >= 10.0 && active_window_s <= 1e6))) {
     return Status::Error("active_window_s must be 0 (keep every node) or in [10, 1e6] s");
@@ -225,6 +231,15 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     return Reject(&counters_.rejected_non_finite,
                   "laser pose at " + TimeText(utime) + " has NaN/Inf; dropped");
   }
+  if (!nodes_.empty() && utime == nodes_.back().utime && nodes_.back().from_odometry) {
+    // The laser is back at the stamp of the newest odometry node (LASER OUTAGE): it becomes
+    // that node's RBPF pose.
+    nodes_.back().T_map_base_rbpf = Pose2(T_map_base.x, T_map_base.y, WrapAngle(T_map_base.theta));
+    nodes_.back().from_odometry = false;
+    --counters_.odometry_nodes;
+    newest_laser_utime_ = utime;
+    return Status::Ok();
+  }
   if (!nodes_.empty() && utime <= nodes_.back().utime) {
     return Reject(&counters_.rejected_node_time, "laser pose at " + TimeText(utime) +
                                                      " is not newer than the newest node (" +
@@ -242,7 +257,38 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     const Pose2 motion = prev.T_map_base_rbpf.between(node.T_map_base_rbpf);
     node.state = ToVector(ToPose2(prev.state) * motion);
   }
-  nodes_.push_back(node);
+  newest_laser_utime_ = utime;
+  AddNode(std::move(node), /*from_laser=*/true);
+  return Status::Ok();
+}
+
+void FactorGraphFusion::AddOdometryNodeIfLaserSilent(Utime t) {
+  // (The first node is a laser pose's: nodes_ not empty means newest_laser_utime_ is set.)
+  if (options_.odometry_nodes_after_s <= 0.0 || nodes_.empty() || t <= nodes_.back().utime ||
+      UtimeDifference(newest_laser_utime_, t) < SecondsToUtime(options_.odometry_nodes_after_s)) {
+    return;
+  }
+  // Nodes every period from the newest node up to t: the first ones fill the time it took to
+  // notice the outage, so that the vision factors of that time find their nodes too.
+  const Utime period = std::max<Utime>(1, SecondsToUtime(options_.odometry_node_period_s));
+  while (UtimeDifference(nodes_.back().utime, t) >= period) {
+    const Node& prev = nodes_.back();
+    const Utime next = prev.utime + period;
+    Pose2 T_odom_prev, T_odom_next;
+    if (!OdometryAt(prev.utime, &T_odom_prev) || !OdometryAt(next, &T_odom_next)) return;
+    const Pose2 motion = T_odom_prev.between(T_odom_next);
+    Node node;
+    node.utime = next;
+    node.T_map_base_rbpf = prev.T_map_base_rbpf * motion;  // stands in for the RBPF's pose
+    node.state = ToVector(ToPose2(prev.state) * motion);
+    node.from_odometry = true;
+    ++counters_.odometry_nodes;
+    AddNode(std::move(node), /*from_laser=*/false);
+  }
+}
+
+void FactorGraphFusion::AddNode(Node node, bool from_laser) {
+  nodes_.push_back(std::move(node));
   ++counters_.nodes;
   const int index = static_cast<int>(nodes_.size()) - 1;
   if (index == 0) {
@@ -257,7 +303,7 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     MakeCost(&prior);
     AddGraphFactor(std::move(prior));
   }
-  if (index > 0 &&
+  if (index > 0 && from_laser &&
       (options_.laser_chain_factors == "always" ||
        (options_.laser_chain_factors == "odometry_gaps" && !options_.use_wheel_odometry))) {
     AddChainFactor(index);
@@ -269,7 +315,6 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     full_solve_requested_ = true;
   }
   RetireOldNodes();
-  return Status::Ok();
 }
 
 Status FactorGraphFusion::PlaceLateLaserPose(Utime utime, const Pose2& T_map_base,
@@ -304,6 +349,7 @@ Status FactorGraphFusion::PlaceLateLaserPose(Utime utime, const Pose2& T_map_bas
   out->T_map_base = TimelinePose(n) * TimelineRbpf(n).between(T_map_t_rbpf);
   late_placed_.insert(utime);
   if (late_placed_.size() > kMaxLatePlacedStamps) late_placed_.erase(late_placed_.begin());
+  newest_laser_utime_ = std::max(newest_laser_utime_, utime);  // the laser is back
   ++counters_.late_laser_poses_placed;
   return Status::Ok();
 }
@@ -549,6 +595,7 @@ Status FactorGraphFusion::AddOdometry(Utime utime, const Pose2& T_odom_base) {
   }
   odometry_.push_back({utime, T_odom_base});
   AddOdometryFactors();
+  AddOdometryNodeIfLaserSilent(utime);
   // Keep only what the next node pairs may still need.
   const Utime keep_from = next_odom_pair_ - 1 < num_nodes()
                               ? nodes_[next_odom_pair_ - 1].utime
@@ -996,6 +1043,7 @@ void ForEachCounter(FusionCounters* c, F f) {
         &c->rejected_information, &c->rejected_no_node, &c->rejected_same_node,
         &c->dropped_pending_overflow, &c->rejected_odometry, &c->late_laser_poses_placed,
         &c->late_odometry_placed, &c->odometry_gaps, &c->odometry_factors, &c->chain_factors,
+        &c->odometry_nodes,
         &c->full_solves, &c->updates, &c->retired_nodes, &c->merged_nodes,
         &c->reanchored_factors, &c->retired_factors}) {
     f(v);
@@ -1045,7 +1093,7 @@ RelativePoseFactor GetRelativePoseFactor(StateReader* r) {
 }
 
 // Smallest saved sizes, for StateReader::Count.
-constexpr size_t kNodeBytes = 8 + 3 * 8 + 3 * 8 + 1;
+constexpr size_t kNodeBytes = 8 + 3 * 8 + 3 * 8 + 2;
 constexpr size_t kFactorBytes = 4 + 4 + 3 * 8 + 2 * 9 * 8 + 3;
 constexpr size_t kPendingBytes = 8 + 8 + 16 * 8 + 36 * 8 + 2 + 3 * 8 + 9 * 8;
 constexpr size_t kPoseSampleBytes = 8 + 3 * 8;
@@ -1063,6 +1111,7 @@ void FactorGraphFusion::SaveState(StateWriter* w) const {
     w->Put(n.T_map_base_rbpf);
     w->Put(n.state);
     w->Put(static_cast<uint8_t>(n.fixed));
+    w->Put(static_cast<uint8_t>(n.from_odometry));
   }
   w->PutCount(factors_.size());
   for (const Factor& f : factors_) {
@@ -1089,6 +1138,7 @@ void FactorGraphFusion::SaveState(StateWriter* w) const {
   w->PutCount(late_placed_.size());
   for (Utime t : late_placed_) w->Put(t);
   retired_.SaveState(w);
+  w->Put(newest_laser_utime_);
   w->Put(static_cast<int32_t>(next_odom_pair_));
   w->Put(static_cast<int32_t>(oldest_touched_node_));
   w->Put(static_cast<uint8_t>(full_solve_requested_));
@@ -1115,6 +1165,7 @@ void FactorGraphFusion::LoadState(StateReader* r) {
     n.T_map_base_rbpf = GetFinitePose(r, "node.T_map_base_rbpf");
     n.state = GetFiniteMatrix<3, 1>(r, "node.state");
     n.fixed = r->GetBool("node.fixed");
+    n.from_odometry = r->GetBool("node.from_odometry");
     s.nodes_.push_back(std::move(n));
   }
   const int n = static_cast<int>(num_nodes);
@@ -1162,6 +1213,7 @@ void FactorGraphFusion::LoadState(StateReader* r) {
   for (size_t k = 0; k < num_late; ++k) s.late_placed_.insert(r->Get<int64_t>("late stamp"));
   s.retired_.SpillTo(retired_.spill_file(), retired_.keep_in_memory(), retired_.spill_batch());
   s.retired_.LoadState(r);
+  s.newest_laser_utime_ = r->Get<int64_t>("newest_laser_utime");
   s.next_odom_pair_ = r->Get<int32_t>("next_odom_pair");
   s.oldest_touched_node_ = r->Get<int32_t>("oldest_touched_node");
   s.full_solve_requested_ = r->GetBool("full_solve_requested");

@@ -292,6 +292,59 @@ TEST(FusionNodeJournal, ASnapshotOfAnotherConfigOrDamagedStartsANewGraph) {
   EXPECT_EQ(after.poses.front().num_nodes, 1);
 }
 
+TEST(FusionNodeInput, ALaserOutageKeepsFusedPosesFromTheOdometry) {
+  // RBPF_POSE silent over steps 10 to 17 (0.8 s; shorter than the RBPF_POSE clock-jump guard's
+  // 1 s, as this test's data time runs faster than its wall time) while the odometry goes on:
+  // 0.3 s into it (odometry_nodes_after_s, 1 s by default) the fusion publishes a fused pose per
+  // odometry node, on the odometry's track; when the laser is back, laser nodes again, each
+  // stamp published once.
+  auto lcm = MakeLcm("memq://");
+  std::vector<fusionloc::fused_pose_t> poses;
+  lcm->Subscribe<fusionloc::fused_pose_t>(
+      channels::kFusedPose,
+      [&](const fusionloc::fused_pose_t& m, const std::string&) { poses.push_back(m); });
+  FusionNodeOptions options;
+  options.map_out = "";
+  options.sync_full_solve = true;
+  FusionProcessConfig config;
+  config.graph.odometry_nodes_after_s = 0.3;
+  FusionNode node(config, options, lcm.get(), ChannelMap());
+  auto silent = [](int k) { return k >= 10 && k < 18; };
+  for (int k = 0; k < 30; ++k) {
+    fusionloc::wheel_odometry_t odom{};
+    odom.utime = StepTime(k, 0);
+    odom.x = TruePose(k).x;
+    odom.y = TruePose(k).y;
+    odom.theta = TruePose(k).theta;
+    lcm->Publish(channels::kOdometry, odom, odom.utime);
+    if (!silent(k)) {
+      lcm->Publish(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)),
+                   StepTime(k, 0));
+    }
+    while (lcm->HandleSubscriptions(0) > 0) {
+    }
+    node.Poll();
+  }
+  std::set<Utime> stamps;
+  std::vector<int> outage_steps;
+  for (const auto& p : poses) {
+    EXPECT_TRUE(stamps.insert(p.utime).second) << "stamp " << p.utime << " published twice";
+    const int k = static_cast<int>((p.utime - StepTime(0, 0)) / 100000);
+    if (silent(k)) {
+      outage_steps.push_back(k);
+      EXPECT_LT(Distance(p, TruePose(k)), 1e-3) << "step " << k;
+    }
+  }
+  // Steps 10 and 11 are filled in when the outage is noticed at step 12, whose pose is
+  // published; then 13 to 17 as the odometry comes.
+  EXPECT_EQ(outage_steps, std::vector<int>({12, 13, 14, 15, 16, 17}));
+  EXPECT_EQ(node.fusion().counters().odometry_nodes, 8);
+  EXPECT_EQ(node.fusion().num_nodes(), 30);
+  EXPECT_TRUE(stamps.count(StepTime(29, 0)));  // the laser's again at the end
+  EXPECT_FALSE(node.fusion().newest_node_from_odometry());
+  EXPECT_EQ(node.fusion().counters().rejected_total(), 0);
+}
+
 // Found by fuzzing (tests/fuzz/regressions/fusion_node/odometry-utime-overflow): odometry,
 // poses, factors or points stamped near the ends of int64 made the fusion's time differences
 // overflow (undefined behaviour). They are refused and counted; the good ones still fuse.

@@ -126,7 +126,7 @@ def main():
         return b"\x01" + b"".join(struct.pack("<HB", at, v) for at, v in pairs)
     write("fusion_state", "valid.bin", edits())
     write("fusion_state", "node-count-high-byte.bin", edits((23, 0x7F)))
-    write("fusion_state", "version.bin", edits((12, 2)))
+    write("fusion_state", "version.bin", edits((12, 3)))
     write("fusion_state", "raw-magic-only.bin", b"\x00FLFUSION")
 
     # ---- KITTI ----

@@ -459,7 +459,9 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     }
   }
   const Eigen::Isometry3d T = IsometryFromArrays(m.pos, m.orientation);
-  if (fusion_.num_nodes() > 0 && m.utime <= fusion_.newest_node_utime()) {
+  const bool takes_over = fusion_.num_nodes() > 0 && m.utime == fusion_.newest_node_utime() &&
+                          fusion_.newest_node_from_odometry();
+  if (fusion_.num_nodes() > 0 && m.utime <= fusion_.newest_node_utime() && !takes_over) {
     // Late (the network delayed or reordered it): placed by its stamp, no node.
     TrajectoryPoint late;
     const Status placed = fusion_.PlaceLateLaserPose(m.utime, Pose2::FromIsometry3(T), &late);
@@ -478,18 +480,28 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     return;
   }
   if (!restoring_) laser_clock_.Accept(m.utime, arrival);
-  last_utime_ = m.utime;
+  if (laser_outage_) {
+    laser_outage_ = false;
+    if (!restoring_) FL_LOG(INFO) << ch_rbpf_pose_ << " is back: laser nodes again";
+  }
+  // (A node that took over an odometry node of its stamp has had its FUSED_POSE.)
+  AfterNewNode(m.utime, t0, /*publish_pose=*/!takes_over);
+}
+
+void FusionNode::AfterNewNode(Utime utime, std::chrono::steady_clock::time_point t0,
+                              bool publish_pose) {
+  last_utime_ = utime;
   if (restoring_) return;  // one full solve at the end of the journal
   const SolveSummary u = fusion_.Update();
-  PublishPose();
+  if (publish_pose) PublishPose();
   if (fusion_.full_solve_requested() && !job_future_.valid()) StartFullSolve();
-  if (UtimeToSeconds(m.utime - last_trajectory_utime_) >= config_.trajectory_period_s) {
-    PublishTrajectory(m.utime);
+  if (UtimeToSeconds(utime - last_trajectory_utime_) >= config_.trajectory_period_s) {
+    PublishTrajectory(utime);
   }
   if (journal_writer_ && node_options_.journal_snapshot_s > 0.0) {
-    if (last_snapshot_utime_ == 0 || m.utime < last_snapshot_utime_) last_snapshot_utime_ = m.utime;
-    if (UtimeToSeconds(m.utime - last_snapshot_utime_) >= node_options_.journal_snapshot_s) {
-      last_snapshot_utime_ = m.utime;
+    if (last_snapshot_utime_ == 0 || utime < last_snapshot_utime_) last_snapshot_utime_ = utime;
+    if (UtimeToSeconds(utime - last_snapshot_utime_) >= node_options_.journal_snapshot_s) {
+      last_snapshot_utime_ = utime;
       snapshot_due_ = true;  // at the next Poll(), after this message is in the journal
     }
   }
@@ -505,6 +517,7 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   status_.Set("odometry_factors", static_cast<double>(fusion_.counters().odometry_factors));
   status_.Set("odometry_gaps", static_cast<double>(fusion_.counters().odometry_gaps));
   status_.Set("chain_factors", static_cast<double>(fusion_.counters().chain_factors));
+  status_.Set("odometry_nodes", static_cast<double>(fusion_.counters().odometry_nodes));
   status_.Set("map_keyframes", map_.num_keyframes());
   status_.Set("map_keyframes_merged", static_cast<double>(map_.merged_keyframes()));
   status_.Set("map_points", static_cast<double>(map_.stored_points()));
@@ -547,8 +560,24 @@ void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
     status_.CountDropped(ch_odometry_ + ": utime " + std::to_string(m.utime) + " out of range");
     return;
   }
+  const auto t0 = std::chrono::steady_clock::now();
+  const int64_t odometry_nodes = fusion_.counters().odometry_nodes;
   const Status s = fusion_.AddOdometry(m.utime, Pose2(m.x, m.y, m.theta));
-  if (!s.ok()) status_.CountDropped(s.message());
+  if (!s.ok()) {
+    status_.CountDropped(s.message());
+    return;
+  }
+  // The laser is silent: the odometry placed a node at its stamp (FusionOptions, LASER OUTAGE).
+  if (fusion_.counters().odometry_nodes > odometry_nodes) {
+    if (!laser_outage_ && !restoring_) {
+      outage_warning_.Warn("no " + ch_rbpf_pose_ + " for " +
+                           FormatDouble(config_.graph.odometry_nodes_after_s) +
+                           " s of odometry: fused poses from the wheel odometry (and the VO) "
+                           "until the laser is back");
+    }
+    laser_outage_ = true;
+    AfterNewNode(m.utime, t0, /*publish_pose=*/true);
+  }
 }
 
 void FusionNode::OnPoints(const fusionloc::point_cloud_t& m) {

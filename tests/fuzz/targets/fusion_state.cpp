@@ -4,10 +4,18 @@
 //  mode odd:  the rest is edits [offset u16 LE][byte] applied to a valid state made by a small
 //             deterministic run (a fusion with retired and map nodes, odometry, a pending
 //             factor and a 3D map), so that the search starts from bytes that load.
+// The valid state's retired trajectory is spilled (all but its newest 3 poses) to a file; each
+// input's fusion is bound to a fresh copy of that file, so that the spilled count and stamp the
+// state names are checked against it (and the copy is spilled into as the loaded fusion goes on).
 // Any bytes either load or throw StateError; a fusion and a map that load take new inputs,
 // solve, and give finite poses without crashing.
+#include <stdlib.h>
+
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "../fuzz_entry.hpp"
@@ -23,6 +31,7 @@ using fl::fusion::FusionOptions;
 using fl::fusion::PointMap;
 using fl::fusion::PointMapOptions;
 using fl::fusion::RelativePoseFactor;
+using fl::fusion::RetiredSpillFile;
 
 constexpr Utime kStepUs = 500000;  // [us] between laser nodes
 
@@ -35,6 +44,31 @@ FusionOptions Options() {
   return o;
 }
 
+constexpr size_t kKeepInMemory = 3;  // retired poses; the rest spilled,
+constexpr size_t kSpillBatch = 2;    // this many at a time
+
+// The valid state's spill file and the working copy the inputs load with; removed at exit.
+struct SpillFiles {
+  SpillFiles() {
+    char pattern[] = "/tmp/fl_fuzz_fusion_state_XXXXXX";
+    const char* made = mkdtemp(pattern);
+    FL_FUZZ_CHECK(made != nullptr);
+    dir = made;
+    original = dir + "/valid.retired";
+    work = dir + "/work.retired";
+  }
+  ~SpillFiles() {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+  }
+  std::string dir, original, work;
+};
+
+SpillFiles& Files() {
+  static SpillFiles files;
+  return files;
+}
+
 Pose2 Truth(int k) { return Pose2(0.1 * k, 0.3 * std::sin(0.05 * k), 0.05 * std::sin(0.03 * k)); }
 
 // A valid state: 60 laser nodes at 2 Hz with odometry, laser factors, a factor still pending
@@ -42,6 +76,8 @@ Pose2 Truth(int k) { return Pose2(0.1 * k, 0.3 * std::sin(0.05 * k), 0.05 * std:
 const std::vector<uint8_t>& ValidState() {
   static const std::vector<uint8_t> bytes = [] {
     FactorGraphFusion fusion(Options());
+    fusion.SpillRetiredTrajectory(std::make_shared<RetiredSpillFile>(Files().original),
+                                  kKeepInMemory, kSpillBatch);
     PointMap map((PointMapOptions()));
     for (int k = 0; k < 60; ++k) {
       const Utime t = 1000000 + kStepUs * static_cast<Utime>(k);
@@ -67,7 +103,7 @@ const std::vector<uint8_t>& ValidState() {
     ahead.utime_j = ahead.utime_i + 2 * kStepUs;
     ahead.information.diagonal() << 1e4, 1e4, 0, 0, 0, 1e5;
     (void)fusion.AddFactor(ahead);
-    FL_FUZZ_CHECK(fusion.num_retired_nodes() > 0 && fusion.num_map_nodes() > 0 &&
+    FL_FUZZ_CHECK(fusion.retired_trajectory().spilled() > 0 && fusion.num_map_nodes() > 0 &&
                   fusion.num_pending_factors() == 1 && map.num_keyframes() > 0);
     fl::StateWriter w;
     fusion.SaveState(&w);
@@ -82,6 +118,7 @@ const std::vector<uint8_t>& ValidState() {
 int Fuzz_fusion_state(const uint8_t* data, size_t size) {
   fl::fuzz::QuietLogs();
   fl::fuzz::Input in(data, size);
+  const std::vector<uint8_t>& valid = ValidState();  // also writes the spill file
   const uint8_t mode = in.Byte();
   std::vector<uint8_t> state;
   const bool unedited = mode % 2 == 1 && in.empty();  // must load
@@ -89,7 +126,7 @@ int Fuzz_fusion_state(const uint8_t* data, size_t size) {
     const std::string_view rest = in.Rest();
     state.assign(rest.begin(), rest.end());
   } else {
-    state = ValidState();
+    state = valid;
     while (!in.empty()) {
       const size_t at = in.U16();
       const uint8_t value = in.Byte();
@@ -97,6 +134,10 @@ int Fuzz_fusion_state(const uint8_t* data, size_t size) {
     }
   }
   FactorGraphFusion fusion(Options());
+  std::filesystem::copy_file(Files().original, Files().work,
+                             std::filesystem::copy_options::overwrite_existing);
+  fusion.SpillRetiredTrajectory(std::make_shared<RetiredSpillFile>(Files().work), kKeepInMemory,
+                                kSpillBatch);
   PointMap map((PointMapOptions()));
   fl::StateReader r(state.data(), state.size());
   try {

@@ -29,6 +29,19 @@
 // (a repeated message) is rejected and counted, never placed twice. Late odometry is inserted in
 // time order while the samples around it are still kept (AddOdometry).
 //
+// LASER OUTAGE: when no laser pose comes (a laser unplugged, the RBPF-SLAM down or refusing a
+// jumping clock) the graph would have no node to put the vision factors on and the robot no
+// fused pose. Once the wheel odometry runs odometry_nodes_after_s ahead of the newest laser pose,
+// AddOdometry adds a node every odometry_node_period_s after the newest node, up to the
+// odometry's time (the first ones fill the second it took to notice), each placed by the
+// odometry's motion from the node before (which also stands in for the RBPF pose there, for the
+// time interpolation below); its odometry factor and the vision factors of its times attach as
+// for a laser node, so the VO corrects the odometry's drift until the laser is back. A laser pose
+// from before the newest odometry node is then placed by its stamp (LATE LASER POSES); the next
+// newer one is a node again, and one of the newest odometry node's own stamp takes that node
+// over (its RBPF pose replaces the stand-in; no second node). No odometry nodes before the first laser pose (it fixes the map
+// frame) or without odometry around the newest node.
+//
 // ASYNCHRONOUS SENSORS / TIME ATTACHMENT: nodes exist at laser times (10 Hz); a factor's
 // times utime_i, utime_j (e.g. 2 Hz vision keyframes) are attached to the NEAREST node if it
 // is within attach_tolerance_s, or, when laser scans were lost, to the nearer of the two nodes
@@ -166,6 +179,11 @@ struct FusionOptions {
   double odom_max_gap_s = 0.5;              // [s] no odometry factor across a larger sample gap
   double odom_max_latency_s = 0.5;          // [s] a node pair still without odometry when the
                                             // newest node is this much newer is a gap
+  // Laser outage (see the file comment, LASER OUTAGE): once the odometry runs this far ahead of
+  // the newest laser pose, a node every odometry_node_period_s placed by the wheel odometry
+  // (0: never; the fused pose then stops until the laser is back).
+  double odometry_nodes_after_s = 1.0;      // [s] of data time
+  double odometry_node_period_s = 0.1;      // [s] between odometry nodes
   int max_pending_factors = 1000;           // factors waiting for their laser node; oldest dropped
   bool compute_covariance = true;           // marginal covariance of the newest node per Update()
   // Bounded graph (see the file comment):
@@ -201,6 +219,8 @@ struct FusionOptions {
     a->Visit("odom_sigma_theta_per_m", &odom_sigma_theta_per_m);
     a->Visit("odom_max_gap_s", &odom_max_gap_s);
     a->Visit("odom_max_latency_s", &odom_max_latency_s);
+    a->Visit("odometry_nodes_after_s", &odometry_nodes_after_s);
+    a->Visit("odometry_node_period_s", &odometry_node_period_s);
     a->Visit("max_pending_factors", &max_pending_factors);
     a->Visit("compute_covariance", &compute_covariance);
     a->Visit("active_window_s", &active_window_s);
@@ -243,6 +263,8 @@ struct FusionCounters {
   int64_t odometry_gaps = 0;             // node pairs without odometry coverage
   int64_t odometry_factors = 0;          // wheel-odometry between-factors added
   int64_t chain_factors = 0;             // RBPF pose-chain factors added
+  int64_t odometry_nodes = 0;            // nodes placed by the wheel odometry (laser outage;
+                                         //   not those a laser pose took over)
   int64_t full_solves = 0;
   int64_t updates = 0;
   int64_t retired_nodes = 0;       // nodes that left the optimised graph (bounded graph)
@@ -302,6 +324,9 @@ class FactorGraphFusion {
   Status PlaceLateLaserPose(Utime utime, const Pose2& T_map_base, TrajectoryPoint* out);
   // Stamp of the newest node (0 if none): a laser pose at or before it is late.
   Utime newest_node_utime() const { return nodes_.empty() ? 0 : nodes_.back().utime; }
+  // The newest node was placed by the wheel odometry (LASER OUTAGE): a laser pose of its stamp
+  // takes it over (AddLaserPose) instead of being late.
+  bool newest_node_from_odometry() const { return !nodes_.empty() && nodes_.back().from_odometry; }
   // A relative-pose factor; attached to nodes by its times (see the file comment). OK also
   // when the factor waits for its laser node (pending).
   Status AddFactor(const RelativePoseFactor& factor);
@@ -369,6 +394,7 @@ class FactorGraphFusion {
     Eigen::Vector3d state = Eigen::Vector3d::Zero();  // fused T_map_base (x, y, theta)
     std::vector<int> factors;                         // indices into factors_
     bool fixed = false;                               // a map node (retired, constant)
+    bool from_odometry = false;  // placed by the wheel odometry in a laser outage
   };
   struct Factor {
     int i = -1, j = -1;  // node indices; j = -1 for the prior
@@ -414,6 +440,11 @@ class FactorGraphFusion {
   void FillUnconstrained(int first);
   // Bounded graph: retires the nodes older than active_window_s (see the file comment).
   void RetireOldNodes();
+  // Appends `node` (newer than every node) and what follows from it: the gauge prior of the
+  // first node, an RBPF chain factor (laser nodes), pending and odometry factors, retirement.
+  void AddNode(Node node, bool from_laser);
+  // LASER OUTAGE: a node at odometry time t if the laser has been silent long enough.
+  void AddOdometryNodeIfLaserSilent(Utime t);
   // The input poses in time order: the retired nodes, then the active nodes.
   int TimelineSize() const;
   Utime TimelineUtime(int k) const;
@@ -432,6 +463,7 @@ class FactorGraphFusion {
   // Stamps of the newest late laser poses placed (PlaceLateLaserPose): a repeat is refused.
   static constexpr size_t kMaxLatePlacedStamps = 4096;
   std::set<Utime> late_placed_;
+  Utime newest_laser_utime_ = 0;  // newest laser pose taken (a node or placed late)
   int next_odom_pair_ = 1;        // next node j needing an odometry factor (j-1, j)
   int oldest_touched_node_ = -1;  // oldest node touched by factors since last Update
   bool full_solve_requested_ = false;

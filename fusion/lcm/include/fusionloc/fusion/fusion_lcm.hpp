@@ -10,6 +10,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <chrono>
 #include <functional>
 #include <future>
 #include <map>
@@ -97,6 +98,9 @@ class FusionNode : public LcmNode {
   void OnLaserPose(const bot_core::pose_t& m);
   void OnFactor(const fusionloc::relative_pose_factor_t& m, const std::string& channel);
   void OnOdometry(const fusionloc::wheel_odometry_t& m);
+  // After a node (laser or odometry) at `utime`: update, publish its FUSED_POSE (publish_pose),
+  // the trajectory and the journal snapshot when due, the status. t0: when its message came in.
+  void AfterNewNode(Utime utime, std::chrono::steady_clock::time_point t0, bool publish_pose);
   void OnPoints(const fusionloc::point_cloud_t& m);
   void PublishPose();  // the newest node's
   // FUSED_POSE of p with the newest node's covariance (a late pose's own is not computed).
@@ -148,6 +152,8 @@ class FusionNode : public LcmNode {
   Utime last_utime_ = 0;
   Utime last_trajectory_utime_ = 0;
   RateLimitedWarning bad_factor_warning_;
+  bool laser_outage_ = false;             // odometry nodes since the last laser node
+  RateLimitedWarning outage_warning_;
   // Journal replay: decoders of the input channels; true while replaying (nothing published,
   // no incremental updates: one full solve at the end).
   std::map<std::string, std::function<bool(const void* data, int size)>> journal_handlers_;
