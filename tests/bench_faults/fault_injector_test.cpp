@@ -115,6 +115,22 @@ TEST(FaultInjector, ClockJumpShiftsOnlyTheWindow) {
   EXPECT_EQ(f.counts().shifted, 5);
 }
 
+TEST(FaultInjector, OutageRemovesTheWindowOnly) {
+  FaultOptions o;
+  o.outage_start_s = 1.0;
+  o.outage_duration_s = 0.5;
+  FaultInjector f(o);
+  const auto out = Stream(&f, 30);
+  ASSERT_EQ(out.size(), 25u);
+  for (size_t i = 0; i < out.size(); ++i) {
+    const int64_t k = static_cast<int64_t>(i < 10 ? i : i + 5);  // 10..14 removed
+    EXPECT_EQ(StampOf(out[i]), 100000 * k) << i;
+  }
+  EXPECT_EQ(f.counts().silenced, 5);
+  EXPECT_EQ(f.counts().dropped, 5);
+  EXPECT_EQ(f.counts().dropped_per_channel.at("LASER"), 5);
+}
+
 TEST(FaultInjector, CorruptsAndRemembersWhat) {
   FaultOptions o;
   o.corrupt_fraction = 1.0;
@@ -144,6 +160,9 @@ TEST(FaultInjector, RejectsInvalidOptions) {
   EXPECT_THROW(FaultInjector{o}, std::invalid_argument);
   o = FaultOptions{};
   o.delay_fraction = 0.1;  // without max_delay_s
+  EXPECT_THROW(FaultInjector{o}, std::invalid_argument);
+  o = FaultOptions{};
+  o.outage_duration_s = -1.0;
   EXPECT_THROW(FaultInjector{o}, std::invalid_argument);
   o = FaultOptions{};
   o.channels = "(";

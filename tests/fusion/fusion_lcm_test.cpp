@@ -335,9 +335,10 @@ TEST(FusionNodeInput, ALaserOutageKeepsFusedPosesFromTheOdometry) {
       EXPECT_LT(Distance(p, TruePose(k)), 1e-3) << "step " << k;
     }
   }
-  // Steps 10 and 11 are filled in when the outage is noticed at step 12, whose pose is
-  // published; then 13 to 17 as the odometry comes.
-  EXPECT_EQ(outage_steps, std::vector<int>({12, 13, 14, 15, 16, 17}));
+  // Steps 10 to 12 when the outage is noticed at step 12 (the first two filled in), then 13 to
+  // 17 as the odometry comes: every step has its fused pose, once.
+  EXPECT_EQ(outage_steps, std::vector<int>({10, 11, 12, 13, 14, 15, 16, 17}));
+  EXPECT_EQ(stamps.size(), 30u);
   EXPECT_EQ(node.fusion().counters().odometry_nodes, 8);
   EXPECT_EQ(node.fusion().num_nodes(), 30);
   EXPECT_TRUE(stamps.count(StepTime(29, 0)));  // the laser's again at the end

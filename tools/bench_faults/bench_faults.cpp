@@ -138,6 +138,14 @@ std::vector<Scenario> Scenarios(const Setup& s) {
     sc.window_end_s = jump_start + jump_len;
   }
   {
+    Scenario& sc = add("laser_outage_10s",
+                       "no LASER for 10 s of scans (the laser unplugged), then back: the fusion "
+                       "goes on from the wheel odometry and the VO");
+    sc.sensors.channels = "LASER";
+    sc.sensors.outage_start_s = jump_start;
+    sc.sensors.outage_duration_s = 10.0;
+  }
+  {
     Scenario& sc = add("bad_values",
                        "2 % of every input message (sensors, mountings, "
                        "calibration, estimator outputs) with one numeric field "
@@ -432,6 +440,7 @@ Outcome RunScenario(const Setup& s, const Scenario& sc, int index) {
       .Add("injected_duplicated", static_cast<double>(a.duplicated + b.duplicated))
       .Add("injected_delayed", static_cast<double>(a.delayed + b.delayed))
       .Add("injected_shifted", static_cast<double>(a.shifted + b.shifted))
+      .Add("injected_silenced", static_cast<double>(a.silenced + b.silenced))
       .Add("injected_corrupted", static_cast<double>(a.corrupted + b.corrupted));
   int respawns = 0;
   for (const auto& c : pipeline.Commands()) respawns += c.respawns;
@@ -459,7 +468,8 @@ int main(int argc, char** argv) {
       "fl-bench-faults",
       "Faults injected into the simulated robot through the real processes (dropped, "
       "duplicated, reordered and late messages between drivers, estimators and fusion; a "
-      "sensor clock jumping back and forward; NaN and out-of-range values in every input "
+      "sensor clock jumping back and forward; the laser silent for 10 s; NaN and out-of-range "
+      "values in every input "
       "type; kill -9 of each process under the procman deputy) and into its files (damaged "
       "logs, full disks), each run compared with the undisturbed one. Targets: crashes 0, "
       "fused_ate_ratio <= 2 with 10 % loss.");

@@ -485,15 +485,19 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     if (!restoring_) FL_LOG(INFO) << ch_rbpf_pose_ << " is back: laser nodes again";
   }
   // (A node that took over an odometry node of its stamp has had its FUSED_POSE.)
-  AfterNewNode(m.utime, t0, /*publish_pose=*/!takes_over);
+  AfterNewNode(m.utime, t0, takes_over ? kNoPose : m.utime);
 }
 
 void FusionNode::AfterNewNode(Utime utime, std::chrono::steady_clock::time_point t0,
-                              bool publish_pose) {
+                              Utime publish_from) {
   last_utime_ = utime;
   if (restoring_) return;  // one full solve at the end of the journal
   const SolveSummary u = fusion_.Update();
-  if (publish_pose) PublishPose();
+  if (publish_from == utime) {
+    PublishPose();
+  } else if (publish_from < utime) {
+    for (const TrajectoryPoint& p : fusion_.Trajectory(publish_from)) PublishPose(p);
+  }
   if (fusion_.full_solve_requested() && !job_future_.valid()) StartFullSolve();
   if (UtimeToSeconds(utime - last_trajectory_utime_) >= config_.trajectory_period_s) {
     PublishTrajectory(utime);
@@ -562,6 +566,7 @@ void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
   }
   const auto t0 = std::chrono::steady_clock::now();
   const int64_t odometry_nodes = fusion_.counters().odometry_nodes;
+  const Utime newest_before = fusion_.newest_node_utime();
   const Status s = fusion_.AddOdometry(m.utime, Pose2(m.x, m.y, m.theta));
   if (!s.ok()) {
     status_.CountDropped(s.message());
@@ -576,7 +581,8 @@ void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
                            "until the laser is back");
     }
     laser_outage_ = true;
-    AfterNewNode(m.utime, t0, /*publish_pose=*/true);
+    // Every new node's pose: the first of an outage fill the time it took to notice it.
+    AfterNewNode(fusion_.newest_node_utime(), t0, newest_before + 1);
   }
 }
 

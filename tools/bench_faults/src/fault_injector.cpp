@@ -26,6 +26,10 @@ Status FaultOptions::Validate() const {
   if (!std::isfinite(jump_offset_s) || !(jump_start_s >= 0.0) || !(jump_duration_s >= 0.0)) {
     return Status::Error("jump_offset_s must be finite, jump_start_s and jump_duration_s >= 0");
   }
+  if (!(outage_start_s >= 0.0) || !(outage_duration_s >= 0.0) ||
+      !std::isfinite(outage_start_s + outage_duration_s)) {
+    return Status::Error("outage_start_s and outage_duration_s must be finite and >= 0");
+  }
   try {
     std::regex r(channels);
   } catch (const std::regex_error& e) {
@@ -36,7 +40,8 @@ Status FaultOptions::Validate() const {
 
 bool FaultOptions::any() const {
   return drop_fraction > 0 || duplicate_fraction > 0 || delay_fraction > 0 ||
-         corrupt_fraction > 0 || (jump_offset_s != 0 && jump_duration_s > 0);
+         corrupt_fraction > 0 || (jump_offset_s != 0 && jump_duration_s > 0) ||
+         outage_duration_s > 0;
 }
 
 FaultInjector::FaultInjector(FaultOptions options) : options_(std::move(options)) {
@@ -49,6 +54,17 @@ FaultInjector::FaultInjector(FaultOptions options) : options_(std::move(options)
 bool FaultInjector::Uniform(double fraction) {
   if (fraction <= 0.0) return false;
   return std::uniform_real_distribution<double>(0.0, 1.0)(rng_) < fraction;
+}
+
+bool FaultInjector::StampSeconds(const std::vector<uint8_t>& data, double* t) {
+  int64_t utime = 0;
+  if (!MessageUtime(data, &utime)) return false;
+  if (!have_t0_) {
+    have_t0_ = true;
+    t0_us_ = utime;
+  }
+  *t = 1e-6 * (static_cast<double>(utime) - static_cast<double>(t0_us_));
+  return true;
 }
 
 void FaultInjector::Enqueue(double due_s, FaultEvent event) {
@@ -75,24 +91,24 @@ void FaultInjector::Push(const std::string& channel, const std::vector<uint8_t>&
   const double delay_s =
       std::uniform_real_distribution<double>(0.0, std::max(options_.max_delay_s, 1e-9))(rng_);
   const bool corrupt = Uniform(options_.corrupt_fraction);
-  if (drop) {
+  double t = 0.0;  // [s] of its stamp after the first one
+  const bool stamped =
+      (options_.outage_duration_s > 0.0 ||
+       (options_.jump_offset_s != 0.0 && options_.jump_duration_s > 0.0)) &&
+      StampSeconds(event.data, &t);
+  const bool silenced = stamped && options_.outage_duration_s > 0.0 &&
+                        t >= options_.outage_start_s &&
+                        t < options_.outage_start_s + options_.outage_duration_s;
+  if (drop || silenced) {
     ++counts_.dropped;
     ++counts_.dropped_per_channel[channel];
+    if (silenced) ++counts_.silenced;
     return;
   }
-  if (options_.jump_offset_s != 0.0 && options_.jump_duration_s > 0.0) {
-    int64_t utime = 0;
-    if (MessageUtime(event.data, &utime)) {
-      if (!have_t0_) {
-        have_t0_ = true;
-        t0_us_ = utime;
-      }
-      const double t = 1e-6 * static_cast<double>(utime - t0_us_);
-      if (t >= options_.jump_start_s && t < options_.jump_start_s + options_.jump_duration_s &&
-          ShiftMessageTime(&event.data, std::llround(options_.jump_offset_s * 1e6))) {
-        ++counts_.shifted;
-      }
-    }
+  if (stamped && options_.jump_offset_s != 0.0 && options_.jump_duration_s > 0.0 &&
+      t >= options_.jump_start_s && t < options_.jump_start_s + options_.jump_duration_s &&
+      ShiftMessageTime(&event.data, std::llround(options_.jump_offset_s * 1e6))) {
+    ++counts_.shifted;
   }
   if (corrupt) {
     std::string what;

@@ -98,9 +98,11 @@ class FusionNode : public LcmNode {
   void OnLaserPose(const bot_core::pose_t& m);
   void OnFactor(const fusionloc::relative_pose_factor_t& m, const std::string& channel);
   void OnOdometry(const fusionloc::wheel_odometry_t& m);
-  // After a node (laser or odometry) at `utime`: update, publish its FUSED_POSE (publish_pose),
-  // the trajectory and the journal snapshot when due, the status. t0: when its message came in.
-  void AfterNewNode(Utime utime, std::chrono::steady_clock::time_point t0, bool publish_pose);
+  // After new nodes (laser or odometry), the newest at `utime`: update, publish the FUSED_POSE of
+  // every node from publish_from on (kNoPose: none), the trajectory and the journal snapshot
+  // when due, the status. t0: when their message came in.
+  static constexpr Utime kNoPose = INT64_MAX;
+  void AfterNewNode(Utime utime, std::chrono::steady_clock::time_point t0, Utime publish_from);
   void OnPoints(const fusionloc::point_cloud_t& m);
   void PublishPose();  // the newest node's
   // FUSED_POSE of p with the newest node's covariance (a late pose's own is not computed).

@@ -14,6 +14,8 @@
 //  - clock jump: messages whose time stamp lies in [t0 + jump_start_s, t0 + jump_start_s +
 //    jump_duration_s), t0 the first stamp seen, get jump_offset_s added to every stamp
 //    (a sensor clock jumping backwards or forwards, and back again after the window);
+//  - outage: messages whose time stamp lies in [t0 + outage_start_s, t0 + outage_start_s +
+//    outage_duration_s) are removed (a sensor unplugged, then back);
 //  - corrupt: one numeric field is set to NaN, +-inf or an out-of-range value
 //    (message_faults.hpp).
 // Random choices come from `seed`: the same input gives the same faults.
@@ -41,6 +43,8 @@ struct FaultOptions {
   double jump_offset_s = 0.0;       // [s] added to the stamps in the jump window (0: none)
   double jump_start_s = 0.0;        // [s] after the first stamp seen
   double jump_duration_s = 0.0;     // [s] of stamps (original time) that are shifted
+  double outage_start_s = 0.0;      // [s] after the first stamp seen
+  double outage_duration_s = 0.0;   // [s] of stamps removed (0: none)
   uint64_t seed = 1;
   Status Validate() const;
   bool any() const;
@@ -58,6 +62,7 @@ struct FaultCounts {
   int64_t duplicated = 0;  // extra copies sent
   int64_t delayed = 0;     // held back
   int64_t shifted = 0;     // time stamps moved by the clock jump
+  int64_t silenced = 0;    // removed by the outage (also in dropped)
   int64_t corrupted = 0;   // with a bad field
   std::map<std::string, int64_t> dropped_per_channel;
   std::map<std::string, int64_t> corrupted_per_channel;
@@ -84,6 +89,8 @@ class FaultInjector {
     FaultEvent event;
   };
   bool Uniform(double fraction);
+  // Seconds of `data`'s stamp after the first stamp seen; false if it has none.
+  bool StampSeconds(const std::vector<uint8_t>& data, double* t);
   void Enqueue(double due_s, FaultEvent event);
 
   FaultOptions options_;
