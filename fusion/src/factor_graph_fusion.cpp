@@ -231,15 +231,7 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
     return Reject(&counters_.rejected_non_finite,
                   "laser pose at " + TimeText(utime) + " has NaN/Inf; dropped");
   }
-  if (!nodes_.empty() && utime == nodes_.back().utime && nodes_.back().from_odometry) {
-    // The laser is back at the stamp of the newest odometry node (LASER OUTAGE): it becomes
-    // that node's RBPF pose.
-    nodes_.back().T_map_base_rbpf = Pose2(T_map_base.x, T_map_base.y, WrapAngle(T_map_base.theta));
-    nodes_.back().from_odometry = false;
-    --counters_.odometry_nodes;
-    newest_laser_utime_ = utime;
-    return Status::Ok();
-  }
+  if (TakeOverOdometryNode(utime, T_map_base)) return Status::Ok();
   if (!nodes_.empty() && utime <= nodes_.back().utime) {
     return Reject(&counters_.rejected_node_time, "laser pose at " + TimeText(utime) +
                                                      " is not newer than the newest node (" +
@@ -260,6 +252,21 @@ Status FactorGraphFusion::AddLaserPose(Utime utime, const Pose2& T_map_base) {
   newest_laser_utime_ = utime;
   AddNode(std::move(node), /*from_laser=*/true);
   return Status::Ok();
+}
+
+bool FactorGraphFusion::TakeOverOdometryNode(Utime utime, const Pose2& T_map_base) {
+  if (!Finite(T_map_base) || num_nodes() == num_fixed_ || utime < nodes_[num_fixed_].utime ||
+      utime > nodes_.back().utime) {
+    return false;
+  }
+  const auto it = std::lower_bound(nodes_.begin() + num_fixed_, nodes_.end(), utime,
+                                   [](const Node& n, Utime time) { return n.utime < time; });
+  if (it == nodes_.end() || it->utime != utime || !it->from_odometry) return false;
+  it->T_map_base_rbpf = Pose2(T_map_base.x, T_map_base.y, WrapAngle(T_map_base.theta));
+  it->from_odometry = false;
+  --counters_.odometry_nodes;
+  newest_laser_utime_ = std::max(newest_laser_utime_, utime);  // the laser is back
+  return true;
 }
 
 void FactorGraphFusion::AddOdometryNodeIfLaserSilent(Utime t) {

@@ -1068,10 +1068,20 @@ TEST(FusionFactorGraph, ALaserOutageIsBridgedByOdometryNodesAndTheVisionFactors)
   EXPECT_GE(fused.counters().odometry_nodes, 79);
   EXPECT_LE(fused.counters().odometry_nodes, 81);
   EXPECT_EQ(with_vision.outage_steps_with_pose, 80);
+  // A laser pose of the outage delivered late, at an odometry node's stamp (step 120): that
+  // node takes it as its RBPF pose, once; no node is added.
+  const Utime step_120 = 1000000 + 120 * 100000;
+  const int64_t odometry_nodes = fused.counters().odometry_nodes;
+  const int nodes = fused.num_nodes();
+  EXPECT_TRUE(fused.TakeOverOdometryNode(step_120, Pose2(1, 2, 0.3)));
+  EXPECT_FALSE(fused.TakeOverOdometryNode(step_120, Pose2(1, 2, 0.3)));  // a laser node now
+  EXPECT_FALSE(fused.TakeOverOdometryNode(step_120 + 1, Pose2(1, 2, 0.3)));  // no node there
+  EXPECT_EQ(fused.counters().odometry_nodes, odometry_nodes - 1);
+  EXPECT_EQ(fused.num_nodes(), nodes);
   // Without vision the same nodes follow the odometry alone, and its drift.
   FactorGraphFusion odometry_only(o);
   const OutageRun no_vision = RunLaserOutage(false, &odometry_only);
-  EXPECT_EQ(odometry_only.counters().odometry_nodes, fused.counters().odometry_nodes);
+  EXPECT_EQ(odometry_only.counters().odometry_nodes, odometry_nodes);
   EXPECT_GT(no_vision.worst_outage_error_m, 0.15);
   // (0.24 against 1.62 m when written.)
   EXPECT_LT(with_vision.worst_outage_error_m, 0.3 * no_vision.worst_outage_error_m)

@@ -459,9 +459,19 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     }
   }
   const Eigen::Isometry3d T = IsometryFromArrays(m.pos, m.orientation);
-  const bool takes_over = fusion_.num_nodes() > 0 && m.utime == fusion_.newest_node_utime() &&
-                          fusion_.newest_node_from_odometry();
-  if (fusion_.num_nodes() > 0 && m.utime <= fusion_.newest_node_utime() && !takes_over) {
+  // The laser back at the stamp of a node the odometry placed in its outage: that node takes
+  // this RBPF pose (its FUSED_POSE is out already).
+  const bool newest = fusion_.num_nodes() > 0 && m.utime == fusion_.newest_node_utime();
+  if (fusion_.TakeOverOdometryNode(m.utime, Pose2::FromIsometry3(T))) {
+    if (!restoring_ && newest) laser_clock_.Accept(m.utime, arrival);
+    if (laser_outage_) {
+      laser_outage_ = false;
+      if (!restoring_) FL_LOG(INFO) << ch_rbpf_pose_ << " is back: laser nodes again";
+    }
+    if (newest) AfterNewNode(m.utime, t0, kNoPose);
+    return;
+  }
+  if (fusion_.num_nodes() > 0 && m.utime <= fusion_.newest_node_utime()) {
     // Late (the network delayed or reordered it): placed by its stamp, no node.
     TrajectoryPoint late;
     const Status placed = fusion_.PlaceLateLaserPose(m.utime, Pose2::FromIsometry3(T), &late);
@@ -484,8 +494,7 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     laser_outage_ = false;
     if (!restoring_) FL_LOG(INFO) << ch_rbpf_pose_ << " is back: laser nodes again";
   }
-  // (A node that took over an odometry node of its stamp has had its FUSED_POSE.)
-  AfterNewNode(m.utime, t0, takes_over ? kNoPose : m.utime);
+  AfterNewNode(m.utime, t0, m.utime);
 }
 
 void FusionNode::AfterNewNode(Utime utime, std::chrono::steady_clock::time_point t0,

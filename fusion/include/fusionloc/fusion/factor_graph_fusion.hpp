@@ -38,8 +38,8 @@
 // time interpolation below); its odometry factor and the vision factors of its times attach as
 // for a laser node, so the VO corrects the odometry's drift until the laser is back. A laser pose
 // from before the newest odometry node is then placed by its stamp (LATE LASER POSES); the next
-// newer one is a node again, and one of the newest odometry node's own stamp takes that node
-// over (its RBPF pose replaces the stand-in; no second node). No odometry nodes before the first laser pose (it fixes the map
+// newer one is a node again; one of an odometry node's own stamp takes that node over
+// (TakeOverOdometryNode: its RBPF pose replaces the stand-in; no second node). No odometry nodes before the first laser pose (it fixes the map
 // frame) or without odometry around the newest node.
 //
 // ASYNCHRONOUS SENSORS / TIME ATTACHMENT: nodes exist at laser times (10 Hz); a factor's
@@ -324,9 +324,12 @@ class FactorGraphFusion {
   Status PlaceLateLaserPose(Utime utime, const Pose2& T_map_base, TrajectoryPoint* out);
   // Stamp of the newest node (0 if none): a laser pose at or before it is late.
   Utime newest_node_utime() const { return nodes_.empty() ? 0 : nodes_.back().utime; }
-  // The newest node was placed by the wheel odometry (LASER OUTAGE): a laser pose of its stamp
-  // takes it over (AddLaserPose) instead of being late.
+  // The newest node was placed by the wheel odometry (LASER OUTAGE).
   bool newest_node_from_odometry() const { return !nodes_.empty() && nodes_.back().from_odometry; }
+  // LASER OUTAGE: a laser pose whose stamp is that of an active node the odometry placed
+  // becomes that node's RBPF pose (no node added, its fused pose already out): true if it was
+  // taken so; false if there is no such node (then it is a new or a late laser pose).
+  bool TakeOverOdometryNode(Utime utime, const Pose2& T_map_base);
   // A relative-pose factor; attached to nodes by its times (see the file comment). OK also
   // when the factor waits for its laser node (pending).
   Status AddFactor(const RelativePoseFactor& factor);
