@@ -857,21 +857,44 @@ void FeedSteps(const FusionSimData& d, size_t first, size_t last, FactorGraphFus
   }
 }
 
-TEST(FusionFactorGraph, ASavedStateGoesOnExactlyAsTheOriginal) {
-  // Noisy factors, wheel odometry, a 30 s active window (retired and map nodes), saved after
-  // 2.5 of 4 laps and loaded into a new fusion: given the same inputs, both end bit-identical.
+// `laps` of the square with noisy laser and vision factors.
+FusionSimData NoisySquare(int laps) {
   FusionSimOptions so;
-  so.laps = 4;
+  so.laps = laps;
   so.laser_sigma_xy = 0.01;
   so.laser_sigma_theta = 0.003;
   so.vision_sigma_xy = 0.02;
   so.vision_sigma_theta = 0.005;
-  const FusionSimData d = MakeRoundedSquareSim(so);
+  return MakeRoundedSquareSim(so);
+}
+
+// Wheel odometry, periodic full solves and a 30 s active window (retired and map nodes).
+FusionOptions BoundedOptions() {
   FusionOptions o = TestOptions();
   o.use_wheel_odometry = true;
   o.full_solve_every_n_nodes = 100;
   o.max_window_nodes = 100;
   o.active_window_s = 30.0;
+  return o;
+}
+
+// The same stamps and bit-identical poses.
+void ExpectBitIdentical(const std::vector<TrajectoryPoint>& a,
+                        const std::vector<TrajectoryPoint>& b) {
+  ASSERT_EQ(b.size(), a.size());
+  for (size_t k = 0; k < a.size(); ++k) {
+    ASSERT_EQ(a[k].utime, b[k].utime);
+    ASSERT_EQ(a[k].T_map_base.x, b[k].T_map_base.x) << k;
+    ASSERT_EQ(a[k].T_map_base.y, b[k].T_map_base.y) << k;
+    ASSERT_EQ(a[k].T_map_base.theta, b[k].T_map_base.theta) << k;
+  }
+}
+
+TEST(FusionFactorGraph, ASavedStateGoesOnExactlyAsTheOriginal) {
+  // Noisy factors, wheel odometry, a 30 s active window (retired and map nodes), saved after
+  // 2.5 of 4 laps and loaded into a new fusion: given the same inputs, both end bit-identical.
+  const FusionSimData d = NoisySquare(4);
+  const FusionOptions o = BoundedOptions();
   FactorGraphFusion original(o);
   const size_t half = d.rbpf.size() * 5 / 8;
   FeedSteps(d, 0, half, &original);
@@ -895,15 +918,9 @@ TEST(FusionFactorGraph, ASavedStateGoesOnExactlyAsTheOriginal) {
   }
   original.FullSolve();
   loaded.FullSolve();
-  const auto a = original.Trajectory(), b = loaded.Trajectory();
+  const auto a = original.Trajectory();
   ASSERT_EQ(a.size(), d.truth.size());
-  ASSERT_EQ(b.size(), a.size());
-  for (size_t k = 0; k < a.size(); ++k) {
-    ASSERT_EQ(a[k].utime, b[k].utime);
-    ASSERT_EQ(a[k].T_map_base.x, b[k].T_map_base.x) << k;
-    ASSERT_EQ(a[k].T_map_base.y, b[k].T_map_base.y) << k;
-    ASSERT_EQ(a[k].T_map_base.theta, b[k].T_map_base.theta) << k;
-  }
+  ExpectBitIdentical(a, loaded.Trajectory());
   EXPECT_EQ(loaded.latest_covariance(), original.latest_covariance());
   EXPECT_EQ(loaded.counters().factors_added, original.counters().factors_added);
   EXPECT_EQ(loaded.counters().odometry_factors, original.counters().odometry_factors);
@@ -916,18 +933,8 @@ TEST(FusionFactorGraph, ASpilledRetiredTrajectoryChangesNoResult) {
   // spills all but the newest 20 poses to a file: bit-identical trajectories, poses at retired
   // times, and late factors onto them; the spilling one saved halfway and restored from its
   // snapshot and (a copy of) its file goes on identically too, and its snapshot is smaller.
-  FusionSimOptions so;
-  so.laps = 6;
-  so.laser_sigma_xy = 0.01;
-  so.laser_sigma_theta = 0.003;
-  so.vision_sigma_xy = 0.02;
-  so.vision_sigma_theta = 0.005;
-  const FusionSimData d = MakeRoundedSquareSim(so);
-  FusionOptions o = TestOptions();
-  o.use_wheel_odometry = true;
-  o.full_solve_every_n_nodes = 100;
-  o.max_window_nodes = 100;
-  o.active_window_s = 30.0;
+  const FusionSimData d = NoisySquare(6);
+  const FusionOptions o = BoundedOptions();
   fl::test::TempDir dir;
   FactorGraphFusion in_memory(o), spilled(o);
   spilled.SpillRetiredTrajectory(std::make_shared<RetiredSpillFile>(dir.file("a.retired")), 20,
@@ -969,13 +976,7 @@ TEST(FusionFactorGraph, ASpilledRetiredTrajectoryChangesNoResult) {
   const auto a = in_memory.Trajectory();
   ASSERT_EQ(a.size(), d.truth.size());
   for (const FactorGraphFusion* f : {&spilled, &restored}) {
-    const auto b = f->Trajectory();
-    ASSERT_EQ(b.size(), a.size());
-    for (size_t k = 0; k < a.size(); ++k) {
-      ASSERT_EQ(a[k].utime, b[k].utime);
-      ASSERT_EQ(a[k].T_map_base.x, b[k].T_map_base.x) << k;
-      ASSERT_EQ(a[k].T_map_base.theta, b[k].T_map_base.theta) << k;
-    }
+    ExpectBitIdentical(a, f->Trajectory());
     for (const Utime t : {d.truth[old].utime + 30000, d.truth[old * 5].utime, a.back().utime}) {
       Pose2 p, q;
       ASSERT_TRUE(in_memory.PoseAt(t, &p));

@@ -97,14 +97,15 @@ bot_core::pose_t RbpfPoseMessage(Utime utime, const Pose2& T) {
 
 // A live (memq://) FusionNode (inline solves, no map file) and the fused poses it publishes.
 struct LiveFusion {
-  LiveFusion() : lcm(MakeLcm("memq://")) {
+  explicit LiveFusion(const FusionProcessConfig& config = FusionProcessConfig())
+      : lcm(MakeLcm("memq://")) {
     lcm->Subscribe<fusionloc::fused_pose_t>(
         channels::kFusedPose,
         [this](const fusionloc::fused_pose_t& m, const std::string&) { fused.push_back(m); });
     FusionNodeOptions options;
     options.map_out = "";
     options.sync_full_solve = true;
-    node = std::make_unique<FusionNode>(FusionProcessConfig(), options, lcm.get(), ChannelMap());
+    node = std::make_unique<FusionNode>(config, options, lcm.get(), ChannelMap());
   }
   template <class Msg>
   void Send(const std::string& channel, const Msg& msg) {
@@ -298,17 +299,9 @@ TEST(FusionNodeInput, ALaserOutageKeepsFusedPosesFromTheOdometry) {
   // 0.3 s into it (odometry_nodes_after_s, 1 s by default) the fusion publishes a fused pose per
   // odometry node, on the odometry's track; when the laser is back, laser nodes again, each
   // stamp published once.
-  auto lcm = MakeLcm("memq://");
-  std::vector<fusionloc::fused_pose_t> poses;
-  lcm->Subscribe<fusionloc::fused_pose_t>(
-      channels::kFusedPose,
-      [&](const fusionloc::fused_pose_t& m, const std::string&) { poses.push_back(m); });
-  FusionNodeOptions options;
-  options.map_out = "";
-  options.sync_full_solve = true;
   FusionProcessConfig config;
   config.graph.odometry_nodes_after_s = 0.3;
-  FusionNode node(config, options, lcm.get(), ChannelMap());
+  LiveFusion f(config);
   auto silent = [](int k) { return k >= 10 && k < 18; };
   for (int k = 0; k < 30; ++k) {
     fusionloc::wheel_odometry_t odom{};
@@ -316,18 +309,14 @@ TEST(FusionNodeInput, ALaserOutageKeepsFusedPosesFromTheOdometry) {
     odom.x = TruePose(k).x;
     odom.y = TruePose(k).y;
     odom.theta = TruePose(k).theta;
-    lcm->Publish(channels::kOdometry, odom, odom.utime);
-    if (!silent(k)) {
-      lcm->Publish(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)),
-                   StepTime(k, 0));
-    }
-    while (lcm->HandleSubscriptions(0) > 0) {
-    }
-    node.Poll();
+    f.Send(channels::kOdometry, odom);
+    if (!silent(k)) f.Send(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)));
+    f.node->Poll();
   }
+  const FusionNode& node = *f.node;
   std::set<Utime> stamps;
   std::vector<int> outage_steps;
-  for (const auto& p : poses) {
+  for (const auto& p : f.fused) {
     EXPECT_TRUE(stamps.insert(p.utime).second) << "stamp " << p.utime << " published twice";
     const int k = static_cast<int>((p.utime - StepTime(0, 0)) / 100000);
     if (silent(k)) {

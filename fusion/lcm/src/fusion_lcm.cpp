@@ -581,7 +581,8 @@ void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
     status_.CountDropped(s.message());
     return;
   }
-  // The laser is silent: the odometry placed a node at its stamp (FusionOptions, LASER OUTAGE).
+  // The laser is silent: the odometry placed nodes up to its stamp (FactorGraphFusion, LASER
+  // OUTAGE).
   if (fusion_.counters().odometry_nodes > odometry_nodes) {
     if (!laser_outage_ && !restoring_) {
       outage_warning_.Warn("no " + ch_rbpf_pose_ + " for " +
