@@ -9,7 +9,11 @@
 // state names are checked against it (and the copy is spilled into as the loaded fusion goes on).
 // Any bytes either load or throw StateError; a fusion and a map that load take new inputs,
 // solve, and give finite poses without crashing.
+#include <fcntl.h>
 #include <stdlib.h>
+#include <unistd.h>
+
+#include <cerrno>
 
 #include <algorithm>
 #include <cmath>
@@ -67,6 +71,29 @@ struct SpillFiles {
 SpillFiles& Files() {
   static SpillFiles files;
   return files;
+}
+
+// Copies `from` to `to` (replaced), retrying reads and writes interrupted by libFuzzer's timer
+// signal (std::filesystem::copy_file gives up on EINTR).
+void CopyFile(const std::string& from, const std::string& to) {
+  const int in = ::open(from.c_str(), O_RDONLY | O_CLOEXEC);
+  const int out = ::open(to.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  FL_FUZZ_CHECK(in >= 0 && out >= 0);
+  char buffer[65536];
+  for (;;) {
+    const ssize_t n = ::read(in, buffer, sizeof(buffer));
+    if (n < 0 && errno == EINTR) continue;
+    FL_FUZZ_CHECK(n >= 0);
+    if (n == 0) break;
+    for (ssize_t done = 0; done < n;) {
+      const ssize_t w = ::write(out, buffer + done, static_cast<size_t>(n - done));
+      if (w < 0 && errno == EINTR) continue;
+      FL_FUZZ_CHECK(w > 0);
+      done += w;
+    }
+  }
+  ::close(in);
+  ::close(out);
 }
 
 Pose2 Truth(int k) { return Pose2(0.1 * k, 0.3 * std::sin(0.05 * k), 0.05 * std::sin(0.03 * k)); }
@@ -134,8 +161,7 @@ int Fuzz_fusion_state(const uint8_t* data, size_t size) {
     }
   }
   FactorGraphFusion fusion(Options());
-  std::filesystem::copy_file(Files().original, Files().work,
-                             std::filesystem::copy_options::overwrite_existing);
+  CopyFile(Files().original, Files().work);
   fusion.SpillRetiredTrajectory(std::make_shared<RetiredSpillFile>(Files().work), kKeepInMemory,
                                 kSpillBatch);
   PointMap map((PointMapOptions()));
