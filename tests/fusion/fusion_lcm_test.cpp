@@ -36,6 +36,24 @@ Pose2 TruePose(int k) {
 // graph would fall back to).
 Pose2 RbpfPose(int k) { return TruePose(k) * Pose2(0.01 * k, 0.005 * k, 0.004 * k); }
 
+// The wheel odometry message of step k (exact: the true pose).
+fusionloc::wheel_odometry_t OdometryMessage(int k, Utime offset = 0) {
+  fusionloc::wheel_odometry_t m{};
+  m.utime = StepTime(k, offset);
+  m.x = TruePose(k).x;
+  m.y = TruePose(k).y;
+  m.theta = TruePose(k).theta;
+  return m;
+}
+
+// The RBPF pose message at `utime`.
+bot_core::pose_t RbpfPoseMessage(Utime utime, const Pose2& T) {
+  bot_core::pose_t m{};
+  m.utime = utime;
+  IsometryToArrays(T.ToIsometry3(), m.pos, m.orientation);
+  return m;
+}
+
 struct FusionRun {
   std::vector<fusionloc::fused_pose_t> poses;
   std::vector<fusionloc::trajectory_t> trajectories;
@@ -65,16 +83,9 @@ FusionRun RunFusion(const std::string& journal, int first, int last, bool finish
   options.retired_in_memory = retired_in_memory;
   FusionNode node(config, options, lcm.get(), ChannelMap());
   for (int k = first; k < last; ++k) {
-    fusionloc::wheel_odometry_t odom{};
-    odom.utime = StepTime(k, offset);
-    odom.x = TruePose(k).x;
-    odom.y = TruePose(k).y;
-    odom.theta = TruePose(k).theta;
-    lcm->Publish(channels::kOdometry, odom, odom.utime);
-    bot_core::pose_t pose{};
-    pose.utime = StepTime(k, offset);
-    IsometryToArrays(RbpfPose(k).ToIsometry3(), pose.pos, pose.orientation);
-    lcm->Publish(channels::kRbpfPose, pose, pose.utime);
+    lcm->Publish(channels::kOdometry, OdometryMessage(k, offset), StepTime(k, offset));
+    lcm->Publish(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, offset), RbpfPose(k)),
+                 StepTime(k, offset));
     while (lcm->HandleSubscriptions(0) > 0) {
     }
     node.Poll();  // as the process loop does after every batch
@@ -85,14 +96,6 @@ FusionRun RunFusion(const std::string& journal, int first, int last, bool finish
     }
   }
   return run;
-}
-
-// The RBPF pose message at `utime`.
-bot_core::pose_t RbpfPoseMessage(Utime utime, const Pose2& T) {
-  bot_core::pose_t m{};
-  m.utime = utime;
-  IsometryToArrays(T.ToIsometry3(), m.pos, m.orientation);
-  return m;
 }
 
 // A live (memq://) FusionNode (inline solves, no map file) and the fused poses it publishes.
@@ -304,12 +307,7 @@ TEST(FusionNodeInput, ALaserOutageKeepsFusedPosesFromTheOdometry) {
   LiveFusion f(config);
   auto silent = [](int k) { return k >= 10 && k < 18; };
   for (int k = 0; k < 30; ++k) {
-    fusionloc::wheel_odometry_t odom{};
-    odom.utime = StepTime(k, 0);
-    odom.x = TruePose(k).x;
-    odom.y = TruePose(k).y;
-    odom.theta = TruePose(k).theta;
-    f.Send(channels::kOdometry, odom);
+    f.Send(channels::kOdometry, OdometryMessage(k));
     if (!silent(k)) f.Send(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)));
     f.node->Poll();
   }
@@ -366,12 +364,7 @@ TEST(FusionNodeInput, ALateLaserPoseGetsItsFusedPoseAtItsStamp) {
   LiveFusion f;
   for (int k = 0; k < 12; ++k) {
     if (k == 5) continue;  // delayed
-    fusionloc::wheel_odometry_t odo{};
-    odo.utime = StepTime(k, 0);
-    odo.x = TruePose(k).x;
-    odo.y = TruePose(k).y;
-    odo.theta = TruePose(k).theta;
-    f.Send(channels::kOdometry, odo);
+    f.Send(channels::kOdometry, OdometryMessage(k));
     f.Send(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)));
   }
   ASSERT_EQ(f.fused.size(), 11u);
@@ -413,12 +406,7 @@ TEST(FusionNodeTrajectory, PeriodicMessagesCarryTheLatestPartAndTheLastOneAll) {
   options.sync_full_solve = true;
   FusionNode node(config, options, lcm.get(), ChannelMap());
   for (int k = 0; k < kLongSteps; ++k) {
-    fusionloc::wheel_odometry_t odom{};
-    odom.utime = StepTime(k, 0);
-    odom.x = TruePose(k).x;
-    odom.y = TruePose(k).y;
-    odom.theta = TruePose(k).theta;
-    lcm->Publish(channels::kOdometry, odom, odom.utime);
+    lcm->Publish(channels::kOdometry, OdometryMessage(k), StepTime(k, 0));
     lcm->Publish(channels::kRbpfPose, RbpfPoseMessage(StepTime(k, 0), RbpfPose(k)), 0);
     while (lcm->HandleSubscriptions(0) > 0) {
     }

@@ -61,6 +61,12 @@ void ExpectHolds(const RetiredTrajectory& t, size_t n, double offset = 0.0) {
   EXPECT_EQ(t.LowerBound(MakeRecord(n - 1).utime + 1), n);
 }
 
+// Records [0, n) into `t`, spilling all but the newest 50 into a file at `path`.
+void FillSpilling(RetiredTrajectory* t, const std::string& path, size_t n) {
+  t->SpillTo(std::make_shared<RetiredSpillFile>(path), 50);
+  for (size_t k = 0; k < n; ++k) t->push_back(MakeRecord(k));
+}
+
 std::vector<uint8_t> Save(const RetiredTrajectory& t) {
   StateWriter w;
   t.SaveState(&w);
@@ -147,8 +153,7 @@ TEST(RetiredTrajectory, AStateWhoseRecordsTheFileDoesNotHoldIsRefused) {
   TempDir dir;
   const std::string path = dir.file("j.retired");
   RetiredTrajectory original;
-  original.SpillTo(std::make_shared<RetiredSpillFile>(path), 50);
-  for (size_t k = 0; k < 1500; ++k) original.push_back(MakeRecord(k));
+  FillSpilling(&original, path, 1500);
   ASSERT_EQ(original.spilled(), RetiredTrajectory::kDefaultSpillBatch);
   const std::vector<uint8_t> snapshot = Save(original);
   auto expect_refused = [&](RetiredTrajectory* t, const std::string& words) {
@@ -202,8 +207,7 @@ TEST(RetiredTrajectory, AFailedSpillKeepsTheRecordsInMemoryAndTriesAgain) {
   TempDir dir;
   const std::string path = dir.file("j.retired");
   RetiredTrajectory t;
-  t.SpillTo(std::make_shared<RetiredSpillFile>(path), 50);
-  for (size_t k = 0; k < 1100; ++k) t.push_back(MakeRecord(k));
+  FillSpilling(&t, path, 1100);
   ASSERT_EQ(t.spilled(), RetiredTrajectory::kDefaultSpillBatch);
   // A full disk: the file may not grow past its size now (EFBIG instead of SIGXFSZ).
   const auto previous_handler = std::signal(SIGXFSZ, SIG_IGN);

@@ -462,12 +462,15 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
   // The laser back at the stamp of a node the odometry placed in its outage: that node takes
   // this RBPF pose (its FUSED_POSE is out already).
   const bool newest = fusion_.num_nodes() > 0 && m.utime == fusion_.newest_node_utime();
+  const bool in_outage = fusion_.newest_node_from_odometry();
+  auto log_back = [&] {
+    if (in_outage && !fusion_.newest_node_from_odometry() && !restoring_) {
+      FL_LOG(INFO) << ch_rbpf_pose_ << " is back: laser nodes again";
+    }
+  };
   if (fusion_.TakeOverOdometryNode(m.utime, Pose2::FromIsometry3(T))) {
     if (!restoring_ && newest) laser_clock_.Accept(m.utime, arrival);
-    if (laser_outage_) {
-      laser_outage_ = false;
-      if (!restoring_) FL_LOG(INFO) << ch_rbpf_pose_ << " is back: laser nodes again";
-    }
+    log_back();
     if (newest) AfterNewNode(m.utime, t0, kNoPose);
     return;
   }
@@ -490,10 +493,7 @@ void FusionNode::OnLaserPose(const bot_core::pose_t& m) {
     return;
   }
   if (!restoring_) laser_clock_.Accept(m.utime, arrival);
-  if (laser_outage_) {
-    laser_outage_ = false;
-    if (!restoring_) FL_LOG(INFO) << ch_rbpf_pose_ << " is back: laser nodes again";
-  }
+  log_back();
   AfterNewNode(m.utime, t0, m.utime);
 }
 
@@ -576,6 +576,7 @@ void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
   const auto t0 = std::chrono::steady_clock::now();
   const int64_t odometry_nodes = fusion_.counters().odometry_nodes;
   const Utime newest_before = fusion_.newest_node_utime();
+  const bool in_outage = fusion_.newest_node_from_odometry();
   const Status s = fusion_.AddOdometry(m.utime, Pose2(m.x, m.y, m.theta));
   if (!s.ok()) {
     status_.CountDropped(s.message());
@@ -584,13 +585,12 @@ void FusionNode::OnOdometry(const fusionloc::wheel_odometry_t& m) {
   // The laser is silent: the odometry placed nodes up to its stamp (FactorGraphFusion, LASER
   // OUTAGE).
   if (fusion_.counters().odometry_nodes > odometry_nodes) {
-    if (!laser_outage_ && !restoring_) {
+    if (!in_outage && !restoring_) {
       outage_warning_.Warn("no " + ch_rbpf_pose_ + " for " +
                            FormatDouble(config_.graph.odometry_nodes_after_s) +
                            " s of odometry: fused poses from the wheel odometry (and the VO) "
                            "until the laser is back");
     }
-    laser_outage_ = true;
     // Every new node's pose: the first of an outage fill the time it took to notice it.
     AfterNewNode(fusion_.newest_node_utime(), t0, newest_before + 1);
   }

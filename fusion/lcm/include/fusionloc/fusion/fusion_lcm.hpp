@@ -154,7 +154,6 @@ class FusionNode : public LcmNode {
   Utime last_utime_ = 0;
   Utime last_trajectory_utime_ = 0;
   RateLimitedWarning bad_factor_warning_;
-  bool laser_outage_ = false;             // odometry nodes since the last laser node
   RateLimitedWarning outage_warning_;
   // Journal replay: decoders of the input channels; true while replaying (nothing published,
   // no incremental updates: one full solve at the end).
